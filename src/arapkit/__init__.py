@@ -16,6 +16,7 @@ True
 
 from .errors import InputError
 from .laplacian import LaplacianEditor, laplacian_edit
+from .learn import LearnedRings, learn_rings
 from .mesh import Mesh, load_mesh
 from .solver import Deformer, Result
 
@@ -25,9 +26,11 @@ __all__ = [
     "Deformer",
     "InputError",
     "LaplacianEditor",
+    "LearnedRings",
     "Mesh",
     "Result",
     "__version__",
     "laplacian_edit",
+    "learn_rings",
     "load_mesh",
 ]

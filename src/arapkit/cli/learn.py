@@ -1,0 +1,335 @@
+"""``arapkit learn``: learn a per-vertex rigidity map from a set of deforming shapes.
+
+The shapes share one connectivity: several mesh files (listed, as a glob, or a folder) or
+one ``.npz`` holding ``V`` (frames x vertices x 3) and ``F``. The result is one ring size
+per vertex of the reference, written as text (one r per line) for
+``arapkit deform --rings-file``.
+
+The default omega is ``auto`` (see :func:`arapkit.learn.auto_omega`), not the paper's 0.3:
+on skinned animations 0.3 gives r_max on nearly every vertex, i.e. no map at all. The
+paper's value stays one option away (``--omega 0.3``), and the omega used is printed.
+
+Examples
+--------
+::
+
+    arapkit learn walk.npz -o rings.txt --figure rings.png
+    arapkit learn frames/ -o rings.txt --reference 3 --omega 0.3
+"""
+
+from __future__ import annotations
+
+import argparse
+import glob
+import os
+import re
+import sys
+import time
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from arapkit.cli.common import add_example_epilog, load_mesh_checked, positive_int
+from arapkit.errors import InputError
+
+__all__ = ["Frames", "add_parser", "expand_frames", "load_frames", "parse_omega", "run"]
+
+EXAMPLES = [
+    "arapkit learn walk.npz -o rings.txt --figure rings.png",
+    "arapkit learn 'poses/*.obj' -o rings.txt --ply rings.ply",
+    "arapkit learn poses/ -o rings.txt --reference 2 --omega 0.3",
+    "arapkit deform rest.obj --handles h.json --rings-file rings.txt -o out.ply",
+]
+_MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
+_GLOB_CHARS = re.compile(r"[*?\[]")
+
+
+def parse_omega(text: str) -> float | str:
+    """argparse type: ``auto`` or a number >= 0.
+
+    Examples
+    --------
+    >>> parse_omega("0.3"), parse_omega("AUTO")
+    (0.3, 'auto')
+    """
+    if text.strip().lower() == "auto":
+        return "auto"
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number or 'auto', got {text!r}") from None
+    if not np.isfinite(value) or value < 0:
+        raise argparse.ArgumentTypeError(f"must be a number >= 0 or 'auto', got {text}")
+    return value
+
+
+def _weight_kinds() -> tuple[str, ...]:
+    from arapkit.weights import WEIGHT_KINDS
+
+    return tuple(WEIGHT_KINDS)
+
+
+def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
+    """Register ``learn`` with its options."""
+    p = subparsers.add_parser(
+        "learn",
+        help="learn per-vertex rigidity r from deforming shapes (paper sec. 3.4)",
+        description="Learn a ring size r per vertex from shapes that share one connectivity "
+        "(Chen et al. 2017, sec. 3.4): r_k = argmin_r E_ARAP(k, r) + omega (r_max - r). "
+        "A summary goes to stdout, notes and warnings to stderr.",
+        **add_example_epilog(EXAMPLES),
+    )
+    p.add_argument(
+        "frames",
+        nargs="+",
+        metavar="FRAMES",
+        help="mesh files (OFF, OBJ, PLY, STL), globs, folders of meshes, or one .npz with "
+        "V (frames x vertices x 3) and F",
+    )
+    p.add_argument("-o", "--output", required=True, metavar="OUT",
+                   help="rigidity map: text, one r per line (or .npy)")
+    p.add_argument("--reference", type=int, default=0, metavar="I",
+                   help="index of the reference frame (default 0, the first)")
+    p.add_argument("--r-min", type=positive_int, default=1, metavar="N",
+                   help="smallest ring size (default 1)")
+    p.add_argument("--r-max", type=positive_int, default=6, metavar="N",
+                   help="largest ring size (default 6)")
+    p.add_argument("--omega", type=parse_omega, default="auto", metavar="W",
+                   help="rigidity preference: a number (the paper uses 0.3) or 'auto', the "
+                   "mean energy increment per ring (default auto)")
+    kinds = _weight_kinds()
+    p.add_argument("--weights", default="cotan", choices=kinds,
+                   help=f"edge weights: {', '.join(kinds)} (default cotan, as the paper)")
+    p.add_argument("--figure", metavar="FILE",
+                   help="the reference coloured by r, r_min blue ... r_max red (.png, .pdf, .svg)")
+    p.add_argument("--ply", metavar="FILE", help="the reference as PLY with a 'rings' property")
+    p.add_argument("--energies", metavar="FILE",
+                   help="table E_ARAP(k, r), one row per vertex (.npy, or text otherwise)")
+    p.add_argument("--force", action="store_true", help="allow overwriting an input file")
+    p.add_argument("--quiet", "-q", action="store_true", help="no notes on stderr")
+    return p
+
+
+# -- input frames ------------------------------------------------------------------------
+
+
+class Frames:
+    """Vertex positions of all frames, their shared faces and a name for each frame.
+
+    Attributes
+    ----------
+    vertices : list of (n, 3) float64
+    faces : (m, 3) int64, or None for mesh files (each file has its own, checked later)
+    names : list of str
+    meshes : list of Mesh or None (mesh files only)
+    """
+
+    def __init__(self, vertices, faces, names, meshes=None) -> None:
+        self.vertices, self.faces, self.names, self.meshes = vertices, faces, names, meshes
+
+    def __len__(self) -> int:
+        return len(self.names)
+
+
+def _natural_key(path: str) -> list:
+    # frame_2 before frame_10
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path)]
+
+
+def _is_mesh_file(name: str) -> bool:
+    low = name.lower()
+    return low.endswith(_MESH_SUFFIXES) or low.endswith(tuple(s + ".gz" for s in _MESH_SUFFIXES))
+
+
+def expand_frames(items: list[str]) -> list[str]:
+    """Files named by ``items``: files as given, folders and globs expanded in natural order.
+
+    Examples
+    --------
+    >>> expand_frames(["/no/such/*.obj"])
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: /no/such/*.obj: no files match
+    """
+    paths: list[str] = []
+    for item in items:
+        if os.path.isdir(item):
+            found = sorted((os.path.join(item, f) for f in os.listdir(item) if _is_mesh_file(f)),
+                           key=_natural_key)
+            if not found:
+                raise InputError(f"{item}: folder holds no mesh files (OFF, OBJ, PLY, STL)")
+            paths += found
+        elif not os.path.exists(item) and _GLOB_CHARS.search(item):
+            found = sorted((f for f in glob.glob(item) if os.path.isfile(f)), key=_natural_key)
+            if not found:
+                raise InputError(f"{item}: no files match")
+            paths += found
+        else:
+            if not os.path.exists(item):
+                raise InputError(f"{item}: file not found")
+            paths.append(item)
+    return paths
+
+
+def _load_npz(path: str) -> Frames:
+    try:
+        with np.load(path, allow_pickle=False) as data:
+            if "V" not in data or "F" not in data:
+                raise InputError(f"{path}: expected arrays 'V' (frames x vertices x 3) and 'F' "
+                                 f"(triangles x 3), found {', '.join(data.files) or 'none'}")
+            V, F = np.asarray(data["V"]), np.asarray(data["F"])
+    except InputError:
+        raise
+    except (ValueError, OSError, EOFError) as e:
+        raise InputError(f"{path}: cannot read .npz ({type(e).__name__}: {e})") from None
+    if V.ndim != 3 or V.shape[2] != 3:
+        raise InputError(f"{path}: 'V' must have shape (frames, vertices, 3), got {V.shape}")
+    if F.ndim != 2 or F.shape[1] != 3:
+        raise InputError(f"{path}: 'F' must have shape (triangles, 3), got {F.shape}")
+    names = [f"{os.path.basename(path)}[{i}]" for i in range(len(V))]
+    return Frames([v.astype(np.float64) for v in V], F, names)
+
+
+def load_frames(items: list[str]) -> Frames:
+    """Read the frames named on the command line (see :func:`expand_frames`).
+
+    Examples
+    --------
+    >>> load_frames(["/no/such.npz"])
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: /no/such.npz: file not found
+    """
+    paths = expand_frames(items)
+    npz = [p for p in paths if p.lower().endswith(".npz")]
+    if npz:
+        if len(paths) > 1:
+            raise InputError(f"{npz[0]}: a .npz holds all frames; give it alone, not with "
+                             f"{len(paths) - 1} other file(s)")
+        return _load_npz(npz[0])
+    meshes = [load_mesh_checked(p) for p in paths]
+    return Frames([m.vertices for m in meshes], None, list(paths), meshes)
+
+
+def _check_connectivity(frames: Frames, ref: int) -> None:
+    """Every frame must have the reference's vertex count and (for mesh files) faces."""
+    n = len(frames.vertices[ref])
+    ref_name = os.path.basename(frames.names[ref])  # the path is in the message already
+    for name, V in zip(frames.names, frames.vertices, strict=True):
+        if len(V) != n:
+            raise InputError(f"{name}: has {len(V)} vertices but the reference {ref_name} "
+                             f"has {n}: all frames must share one mesh")
+    if frames.meshes is None:
+        return
+    F0 = frames.meshes[ref].faces
+    for path, m in zip(frames.names, frames.meshes, strict=True):
+        if m.faces.shape != F0.shape or not np.array_equal(m.faces, F0):
+            why = f" (loader: {'; '.join(m.notes)})" if m.notes else ""
+            raise InputError(f"{path}: faces differ from the reference {ref_name}: all "
+                             f"frames must share one connectivity{why}")
+
+
+# -- running -------------------------------------------------------------------------------
+
+
+def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
+    """Fail before any work on an output that cannot be written."""
+    from arapkit.fileio import check_output_path, mesh_format
+
+    if args.output.lower().endswith((".ply", ".ply.gz")):
+        raise InputError(f"{args.output}: the rigidity map is text or .npy; "
+                         "use --ply for a PLY with a 'rings' property")
+    check_output_path(args.output, inputs, args.force, "output")
+    if args.ply:
+        check_output_path(args.ply, inputs, args.force, "PLY")
+        if mesh_format(args.ply)[0] != "ply":
+            raise InputError(f"{args.ply}: --ply needs a .ply (or .ply.gz) file name")
+    if args.figure:
+        check_output_path(args.figure, inputs, args.force, "figure")
+        if Path(args.figure).suffix.lower() not in (".png", ".pdf", ".svg", ".jpg", ".jpeg"):
+            raise InputError(f"{args.figure}: unsupported figure format (use .png, .pdf or .svg)")
+    if args.energies:
+        check_output_path(args.energies, inputs, args.force, "energies")
+
+
+def _warn(message: str) -> None:
+    print(f"arapkit: warning: {message}", file=sys.stderr)
+
+
+def _learn(args, frames: Frames, ref: int):
+    from arapkit import Mesh
+    from arapkit.learn import learn_rings
+
+    if frames.meshes is not None:
+        reference = frames.meshes[ref]
+    else:
+        reference = Mesh(frames.vertices[ref], frames.faces, name=frames.names[ref])
+    others = [i for i in range(len(frames)) if i != ref]
+    with warnings.catch_warnings():
+        # identical frames are reported below by file name instead
+        warnings.simplefilter("ignore", UserWarning)
+        res = learn_rings(reference, [frames.vertices[i] for i in others], args.r_min,
+                          args.r_max, args.omega, args.weights)
+    # warnings are shown even with --quiet: they say the result may be meaningless
+    for j in res.identical:
+        _warn(f"{frames.names[others[j]]} is identical to the reference: it carries no "
+              "information")
+    if len(res.identical) == len(others):
+        _warn("every frame equals the reference, so the map is r_max everywhere")
+    return reference, res
+
+
+def _write(args, reference, res) -> None:
+    from arapkit.handles import save_rings
+
+    save_rings(args.output, res.rings)
+    if args.ply:
+        from arapkit.fileio import save_mesh
+
+        save_mesh(args.ply, reference.vertices, reference.faces,
+                  vertex_properties={"rings": res.rings.astype(np.int32)})
+    if args.energies:
+        from arapkit.fileio import atomic_open
+
+        with atomic_open(args.energies, "wb") as f:
+            if args.energies.lower().endswith(".npy"):
+                np.save(f, res.energies)
+            else:
+                cols = " ".join(f"r{r}" for r in range(res.r_min, res.r_max + 1))
+                np.savetxt(f, res.energies, fmt="%.9g", header=f"E_ARAP(k, r): {cols}")
+    if args.figure:
+        from arapkit.learn import rings_figure
+        from arapkit.plots import save_figure
+
+        title = (f"{reference.name}: learned r from {res.n_examples} examples, "
+                 f"omega = {res.omega:.3g} ({res.omega_rule})")
+        save_figure(rings_figure(reference.vertices, reference.faces, res.rings, res.r_min,
+                                 res.r_max, title=title), args.figure, dpi=150)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``arapkit learn``; returns the exit status (InputError propagates as status 2)."""
+    t0 = time.perf_counter()
+    if args.r_max < args.r_min:
+        raise InputError(f"--r-max ({args.r_max}) must be >= --r-min ({args.r_min})")
+    _check_outputs(args, [f for f in args.frames if os.path.isfile(f)])
+    frames = load_frames(args.frames)
+    if len(frames) < 2:
+        raise InputError(f"learning needs at least two frames (a reference and an example), "
+                         f"got {len(frames)}")
+    ref = args.reference
+    if not 0 <= ref < len(frames):
+        raise InputError(f"--reference {ref} is out of range: there are {len(frames)} frames "
+                         f"(0..{len(frames) - 1})")
+    _check_connectivity(frames, ref)
+    reference, res = _learn(args, frames, ref)
+    _write(args, reference, res)
+    counts = ", ".join(f"{r}: {c}" for r, c in res.histogram().items())
+    print(f"learned r for {len(res.rings)} vertices of {frames.names[ref]} from "
+          f"{res.n_examples} examples; omega = {res.omega:.4g} ({res.omega_rule})")
+    print(f"vertices per r: {counts}")
+    print(f"wrote {args.output} in {time.perf_counter() - t0:.2f} s "
+          f"(energies {res.timings['energy_s']:.2f} s)")
+    sys.stdout.flush()
+    return 0
