@@ -59,6 +59,7 @@ def test_degenerate_and_repeated_faces_dropped():
     assert "zero area (first: face 4)" in joined
     assert "repeat an earlier face (first: face 1)" in joined
     assert "vertex 4" in joined  # now unreferenced, kept fixed
+    assert m.dropped_faces == {"repeated_vertex": 1, "zero_area": 1, "duplicate": 1}
 
 
 def test_unreferenced_vertex_kept():

@@ -69,6 +69,8 @@ class Mesh:
     def __init__(self, vertices, faces, name: str = "mesh") -> None:
         self.name = str(name)
         self.notes: list[str] = []
+        #: faces dropped by validation, by reason ("repeated_vertex", "zero_area", "duplicate")
+        self.dropped_faces: dict[str, int] = {}
         self.vertices = self._check_vertices(vertices)
         self.faces = self._check_faces(faces)
         self.vertices.setflags(write=False)
@@ -142,11 +144,12 @@ class Mesh:
         duplicate = np.ones(len(F), dtype=bool)
         duplicate[first] = False
         duplicate &= ~repeated_vertex & ~zero_area
-        for mask, what in (
-            (repeated_vertex, "repeat a vertex"),
-            (zero_area, "have zero area"),
-            (duplicate, "repeat an earlier face"),
+        for mask, what, key in (
+            (repeated_vertex, "repeat a vertex", "repeated_vertex"),
+            (zero_area, "have zero area", "zero_area"),
+            (duplicate, "repeat an earlier face", "duplicate"),
         ):
+            self.dropped_faces[key] = int(mask.sum())
             if mask.any():
                 idx = np.flatnonzero(mask)
                 self.notes.append(

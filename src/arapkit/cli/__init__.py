@@ -1,0 +1,146 @@
+"""The ``arapkit`` command line.
+
+Subcommands live in their own modules, each exposing ``add_parser(subparsers)`` and
+``run(args) -> int``; :data:`COMMANDS` lists them. Optional commands (``learn``, ``edit``)
+are skipped when their module is not installed.
+
+Exit status: 0 success, 2 bad input (one line on stderr, ``arapkit: error: ...``),
+1 internal error (with a traceback, since it is a bug), 130 interrupted.
+
+Examples
+--------
+>>> from arapkit.cli import main
+>>> main(["--version"])  # doctest: +SKIP
+arapkit 0.1.0
+0
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import os
+import sys
+import traceback
+from collections.abc import Sequence
+from types import ModuleType
+
+from arapkit.errors import InputError
+
+__all__ = ["COMMANDS", "build_parser", "main"]
+
+#: (subcommand, module, required). Optional modules may be absent from an installation.
+COMMANDS: list[tuple[str, str, bool]] = [
+    ("deform", "arapkit.cli.deform", True),
+    ("demo", "arapkit.cli.demo", True),
+    ("info", "arapkit.cli.info", True),
+    ("learn", "arapkit.cli.learn", False),
+    ("edit", "arapkit.cli.edit", False),
+]
+
+_EPILOG = """examples:
+  arapkit demo --out demo-output
+  arapkit info mesh.off
+  arapkit deform mesh.off --handles handles.json --rings 4 -o bent.ply --figure bent.png
+  arapkit deform bar.off --handles bar.sel --transform bar.def -o out.off --report run.json
+"""
+
+
+def _version() -> str:
+    try:
+        from importlib.metadata import version
+
+        return version("arapkit")
+    except Exception:  # not installed (running from a source tree)
+        return "unknown"
+
+
+def _load_command(module: str, required: bool) -> ModuleType | None:
+    try:
+        return importlib.import_module(module)
+    except ModuleNotFoundError as e:
+        # only the command's own module may be missing; a broken import inside it is a bug
+        if not required and e.name == module:
+            return None
+        raise
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The top-level parser with one subparser per available command.
+
+    Examples
+    --------
+    >>> p = build_parser()
+    >>> p.parse_args(["info", "x.off"]).command
+    'info'
+    """
+    parser = argparse.ArgumentParser(
+        prog="arapkit",
+        description="As-rigid-as-possible surface deformation with controllable rigidity "
+        "(r-ring ARAP, Chen et al. 2017).",
+        epilog=_EPILOG,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"arapkit {_version()}")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    for name, module, required in COMMANDS:
+        mod = _load_command(module, required)
+        if mod is None:
+            continue
+        sp = mod.add_parser(sub)
+        sp.set_defaults(_run=mod.run, command=name)
+    return parser
+
+
+def _fail(message: str, code: int) -> int:
+    # one line: a message may carry file content with newlines, which would break that
+    print(f"arapkit: error: {' '.join(str(message).split())}", file=sys.stderr)
+    return code
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; returns the exit status.
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        Arguments without the program name (default ``sys.argv[1:]``).
+
+    Examples
+    --------
+    >>> main(["info", "/no/such/mesh.off"])  # doctest: +SKIP
+    arapkit: error: /no/such/mesh.off: file not found
+    2
+    """
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as e:  # argparse: --help/--version (0) or a usage error (2)
+        return int(e.code or 0)
+    # the report records the command as typed, also when main() is called in-process
+    args._argv = list(sys.argv[1:] if argv is None else argv)
+    if getattr(args, "_run", None) is None:
+        parser.print_help(sys.stderr)
+        return 2
+    try:
+        return int(args._run(args) or 0)
+    except InputError as e:
+        return _fail(str(e), 2)
+    except FileNotFoundError as e:
+        return _fail(f"{e.filename}: file not found", 2)
+    except IsADirectoryError as e:
+        return _fail(f"{e.filename}: is a folder, expected a file", 2)
+    except PermissionError as e:
+        return _fail(f"{e.filename}: permission denied", 2)
+    except KeyboardInterrupt:
+        print("arapkit: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        # stdout closed early (e.g. piped into head): not an error worth a traceback;
+        # point stdout at /dev/null so the interpreter's final flush does not complain
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 0
+    except Exception as e:
+        traceback.print_exc()
+        return _fail(f"internal error ({type(e).__name__}: {e}); please report this", 1)

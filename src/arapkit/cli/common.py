@@ -1,0 +1,150 @@
+"""Helpers shared by the subcommands: argument types, mesh loading, progress bar."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from arapkit.errors import InputError
+
+__all__ = [
+    "Progress",
+    "load_mesh_checked",
+    "note",
+    "positive_float",
+    "positive_int",
+]
+
+
+def positive_int(text: str) -> int:
+    """argparse type: an integer >= 1.
+
+    Examples
+    --------
+    >>> positive_int("3")
+    3
+    """
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """argparse type: a finite number > 0.
+
+    Examples
+    --------
+    >>> positive_float("1e-3")
+    0.001
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value) or value <= 0:
+        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
+    return value
+
+
+def load_mesh_checked(path: str):
+    """:func:`arapkit.load_mesh`, turning any parse failure into an :class:`InputError`.
+
+    A loader that trips over a malformed file (IndexError, ValueError ...) means the file
+    is bad, not that arapkit is broken, so the user gets exit status 2 and a one-liner.
+    """
+    from arapkit import load_mesh
+
+    try:
+        return load_mesh(path)
+    except InputError:
+        raise
+    except (ValueError, IndexError, KeyError, EOFError, UnicodeDecodeError, OSError) as e:
+        raise InputError(f"{path}: cannot read mesh ({type(e).__name__}: {e})") from None
+
+
+def note(message: str, quiet: bool) -> None:
+    """Informational line on stderr (stdout is reserved for results)."""
+    if not quiet:
+        print(f"arapkit: {message}", file=sys.stderr)
+
+
+class Progress:
+    """tqdm progress bar on stderr fed by :meth:`arapkit.Deformer.solve`'s callback.
+
+    Shows iteration, energy and relative decrease. It only appears once a solve has run
+    for ``delay`` seconds, so quick solves print nothing.
+
+    Examples
+    --------
+    >>> with Progress(total=10, disable=True) as p:
+    ...     p(1, 2.0, None)
+    False
+    """
+
+    def __init__(
+        self, total: int | None = None, disable: bool = False, delay: float = 0.5, desc: str = ""
+    ) -> None:
+        from tqdm import tqdm
+
+        self._bar = tqdm(
+            total=total,
+            disable=disable,
+            delay=delay,
+            file=sys.stderr,
+            desc=desc or "solving",
+            unit="it",
+            dynamic_ncols=True,
+            leave=False,
+        )
+        self._prev: float | None = None
+
+    def __call__(self, iteration: int, energy: float, vertices: Any) -> bool:
+        rel = float("nan")
+        if self._prev is not None and self._prev != 0:
+            rel = (self._prev - energy) / abs(self._prev)
+        self._prev = energy
+        self._bar.update(max(iteration - self._bar.n, 0))
+        self._bar.set_postfix_str(f"energy {energy:.4g}, rel. decrease {rel:.2e}", refresh=False)
+        return False
+
+    def close(self) -> None:
+        self._bar.close()
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def rings_summary(rings: np.ndarray) -> dict[str, Any]:
+    """Compact description of a rigidity map for reports.
+
+    Examples
+    --------
+    >>> rings_summary(np.array([2, 2, 6]))
+    {'min': 2, 'max': 6, 'counts': {'2': 2, '6': 1}}
+    """
+    values, counts = np.unique(np.asarray(rings), return_counts=True)
+    return {
+        "min": int(values.min()),
+        "max": int(values.max()),
+        "counts": {str(int(v)): int(c) for v, c in zip(values, counts, strict=True)},
+    }
+
+
+def add_example_epilog(examples: list[str]) -> dict[str, Callable | str]:
+    """Keyword arguments for ``add_parser`` that show ``examples`` verbatim in ``--help``."""
+    return {
+        "epilog": "examples:\n" + "\n".join(f"  {e}" for e in examples),
+        "formatter_class": argparse.RawDescriptionHelpFormatter,
+    }
