@@ -1,0 +1,148 @@
+"""``arapkit edit``: start the browser editor on a mesh and print its address.
+
+Examples
+--------
+>>> import argparse
+>>> p = argparse.ArgumentParser(); sub = p.add_subparsers()
+>>> a = add_parser(sub).parse_args(["bunny.off", "--port", "9000"])
+>>> a.mesh, a.port, a.host
+('bunny.off', 9000, '127.0.0.1')
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+_DESCRIPTION = """\
+Start a local editor in the browser: pick handle regions (click or Shift+drag a rectangle),
+drag their gizmos to deform the mesh live, paint the rigidity r with a brush or a paint
+bucket, colour by r or by energy, undo/redo, save sessions and export the result.
+Without MESH the built-in bar is opened with its left end fixed and its right end as a
+handle. The server binds 127.0.0.1 unless --host says otherwise; press Ctrl-C to stop.
+"""
+
+
+def add_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Register ``edit`` on an argparse subparsers object and return its parser."""
+    p = subparsers.add_parser(
+        "edit",
+        help="interactive browser editor (drag handles, paint r)",
+        description=_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "mesh", nargs="?", metavar="MESH", help="OBJ/PLY/OFF/STL mesh (default: the built-in bar)"
+    )
+    p.add_argument("--rings-file", metavar="R", help="per-vertex r (text, .npy or PLY 'rings')")
+    p.add_argument(
+        "--rings",
+        type=int,
+        default=1,
+        metavar="N",
+        help="uniform r when no rings file is given (default 1)",
+    )
+    p.add_argument("--handles", metavar="H", help="handle file (JSON, or .sel with .def)")
+    p.add_argument(
+        "--session", metavar="S", help="editor session JSON to resume (names its own mesh)"
+    )
+    p.add_argument(
+        "--port",
+        type=int,
+        default=8080,
+        help="port (default 8080; the next free one is used when taken)",
+    )
+    p.add_argument(
+        "--host", default="127.0.0.1", help="address to bind (default 127.0.0.1: this machine only)"
+    )
+    p.add_argument(
+        "--export-dir",
+        default="arapkit-edits",
+        metavar="DIR",
+        help="folder for exports and saved sessions (default ./arapkit-edits)",
+    )
+    p.add_argument(
+        "--max-upload-mb",
+        type=float,
+        default=64.0,
+        metavar="MB",
+        help="size cap for files uploaded from the page (default 64)",
+    )
+    return p
+
+
+def build_state(args: argparse.Namespace) -> Any:
+    """The editor state the command line asks for (raises InputError on bad files).
+
+    Examples
+    --------
+    >>> ns = argparse.Namespace(mesh=None, rings_file=None, rings=2, handles=None,
+    ...                         session=None)
+    >>> st = build_state(ns)
+    >>> [h.name for h in st.handles], int(st.rings[0])
+    (['fixed end', 'free end'], 2)
+    """
+    from arapkit import load_mesh
+    from arapkit.editor.state import EditorState
+    from arapkit.errors import InputError
+    from arapkit.handles import load_handles, load_rings
+
+    if args.session:
+        if args.mesh:
+            raise InputError("give either MESH or --session (the session names its mesh)")
+        st = EditorState.from_session(args.session)
+    elif args.mesh:
+        st = EditorState(load_mesh(args.mesh), mesh_path=str(Path(args.mesh).resolve()))
+    else:
+        st = _bar_state()
+    if args.rings < 1:
+        raise InputError(f"--rings: r must be >= 1, got {args.rings}")
+    if not args.session and args.rings != 1:
+        st.rings = st._check_rings(args.rings)
+    if args.rings_file:
+        st.rings = load_rings(args.rings_file, st.n)
+    if args.handles:
+        st.add_handle_set(load_handles(args.handles, st.mesh.vertices), record=False)
+    st._undo.clear()  # start-up choices are not undoable edits
+    return st
+
+
+def _bar_state() -> Any:
+    from arapkit.editor.state import EditorState
+    from arapkit.shapes import bar
+
+    mesh = bar()
+    st = EditorState(mesh)
+    x = mesh.vertices[:, 0]
+    st.add_handle(np.flatnonzero(x <= x.min() + 1e-9), name="fixed end", frozen=True)
+    st.add_handle(np.flatnonzero(x >= x.max() - 1e-9), name="free end")
+    return st
+
+
+def run(args: argparse.Namespace) -> int:
+    """Start the editor and serve until Ctrl-C."""
+    from arapkit.editor.app import EditorApp
+
+    state = build_state(args)
+    if args.host not in ("127.0.0.1", "localhost", "::1"):
+        print(
+            f"arapkit edit: warning: serving on {args.host}: anyone who can reach this "
+            "address can edit and write to the export folder"
+        )
+    app = EditorApp(
+        state,
+        host=args.host,
+        port=args.port,
+        export_dir=args.export_dir,
+        max_upload_mb=args.max_upload_mb,
+    )
+    print(
+        f"arapkit editor: {app.url}  (mesh {state.mesh.name}, {state.n} vertices; "
+        f"exports go to {app.export_dir}; Ctrl-C to stop)",
+        flush=True,
+    )
+    app.serve_forever()
+    return 0

@@ -1,0 +1,29 @@
+"""Browser editor for arapkit (``arapkit edit``): drag handles, paint rigidity, watch energy.
+
+The package is split so that the logic can be tested without a browser:
+
+* :mod:`arapkit.editor.state` -- selection, handles, rigidity paint, undo, sessions;
+* :mod:`arapkit.editor.worker` -- the background solver thread (latest drag wins);
+* :mod:`arapkit.editor.views` -- colours of the r and energy views;
+* :mod:`arapkit.editor.app` -- the viser page wiring it all together.
+
+Examples
+--------
+>>> from arapkit.shapes import bar
+>>> from arapkit.editor import EditorState
+>>> EditorState(bar()).n
+1154
+"""
+
+from arapkit.editor.state import CameraView, EditorState, Handle, SolverSettings
+from arapkit.editor.worker import SolveRequest, SolveUpdate, SolveWorker
+
+__all__ = [
+    "CameraView",
+    "EditorState",
+    "Handle",
+    "SolveRequest",
+    "SolveUpdate",
+    "SolveWorker",
+    "SolverSettings",
+]

@@ -1,0 +1,309 @@
+"""Background solver thread for the editor: latest request wins, nothing queues.
+
+The UI thread only builds a :class:`SolveRequest` (handles, targets, rings, settings) and
+hands it to :meth:`SolveWorker.submit`.  The worker thread owns the library objects
+(:class:`arapkit.Deformer` / :class:`arapkit.LaplacianEditor`), refactorises only when the
+handle set, the rigidity map, the weights or the mesh change, and warm-starts every solve
+from the last shape it produced.
+
+Supersede rule
+--------------
+There is one slot for a pending request.  A newer request replaces an older pending one
+(dropped, never solved).  A running solve first finishes its *live* chunk (at most
+``live_max_iter`` iterations or ``live_budget_ms`` after the request was made) and sends
+that shape; from then on it keeps iterating towards convergence but stops at the next
+iteration as soon as a newer request is waiting.  So a drag shows a fresh shape after a
+bounded delay, and iterations run to convergence once the user stops moving.
+
+Examples
+--------
+>>> from arapkit.shapes import bar, bar_bend
+>>> from arapkit.editor.state import SolverSettings
+>>> mesh = bar(); h, t = bar_bend(mesh, 30)
+>>> updates = []
+>>> w = SolveWorker(updates.append); w.start()
+>>> seq = w.submit(SolveRequest(mesh, h, t, np.ones(mesh.n_vertices, int), SolverSettings()))
+>>> w.wait_idle(60.0)
+True
+>>> updates[-1].final and updates[-1].seq == seq
+True
+>>> w.stop()
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import threading
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from arapkit.editor.state import SolverSettings
+
+LAPLACIAN_WEIGHTS = ("cotan", "uniform")
+
+
+@dataclasses.dataclass
+class SolveRequest:
+    """Everything one solve needs; built on the UI thread, read-only afterwards."""
+
+    mesh: Any
+    handles: np.ndarray
+    targets: np.ndarray
+    rings: np.ndarray
+    settings: SolverSettings
+    init: np.ndarray | None = None  # start shape; default: the worker's last shape
+    t_submit: float = dataclasses.field(default_factory=time.perf_counter)
+    seq: int = 0
+
+
+@dataclasses.dataclass
+class SolveUpdate:
+    """One shape sent to the display.
+
+    ``final`` marks the last update of a request (a request stopped early for a newer
+    one sends no final update).  ``latency_ms`` is measured from the request to the
+    moment this update is handed to the publisher.
+    """
+
+    seq: int
+    mesh: Any
+    vertices: np.ndarray
+    energy: float
+    iterations: int
+    converged: bool
+    final: bool
+    latency_ms: float
+    vertex_energy: np.ndarray | None = None
+    error: str | None = None
+    setup_ms: float = 0.0
+
+
+class _Engine:
+    """Library solver objects for the current configuration, rebuilt only when needed."""
+
+    def __init__(self) -> None:
+        self.mesh: Any = None
+        self.deformer: Any = None
+        self.laplacian: Any = None
+        self._key: tuple = ()
+        self._lap_key: tuple = ()
+
+    def arap(self, req: SolveRequest) -> Any:
+        from arapkit import Deformer
+
+        s = req.settings
+        if self.deformer is None or self._key != (id(req.mesh), s.weights):
+            self.deformer = Deformer(
+                req.mesh, req.handles, rings=req.rings, weights=s.weights,
+                tol=s.tol, max_iter=s.max_iter,
+            )
+            self._key = (id(req.mesh), s.weights)
+            self.mesh = req.mesh
+            return self.deformer
+        d = self.deformer
+        if not np.array_equal(d.rings, req.rings):
+            d.set_rings(req.rings)
+        if not np.array_equal(d.handles, req.handles):
+            d.set_handles(req.handles)
+        return d
+
+    def laplacian_editor(self, req: SolveRequest) -> Any:
+        from arapkit import LaplacianEditor
+
+        w = req.settings.weights if req.settings.weights in LAPLACIAN_WEIGHTS else "cotan"
+        key = (id(req.mesh), w, req.handles.tobytes())
+        if self.laplacian is None or key != self._lap_key:
+            self.laplacian = LaplacianEditor(req.mesh, req.handles, weights=w)
+            self._lap_key = key
+        return self.laplacian
+
+
+class SolveWorker:
+    """Runs solves on a daemon thread and reports shapes through ``publish``.
+
+    Parameters
+    ----------
+    publish : callable(SolveUpdate)
+        Called on the worker thread; must not block for long (it delays the next solve).
+    publish_interval_s : float
+        Minimum time between intermediate updates after the live one.
+    """
+
+    def __init__(
+        self, publish: Callable[[SolveUpdate], None], publish_interval_s: float = 0.15
+    ) -> None:
+        self._publish = publish
+        self._interval = publish_interval_s
+        self._cond = threading.Condition()
+        self._pending: SolveRequest | None = None
+        self._busy = False
+        self._running = False
+        self._seq = 0
+        self._engine = _Engine()
+        self._shape: np.ndarray | None = None
+        self._shape_mesh: Any = None
+        self._thread: threading.Thread | None = None
+        #: (seq, ms from request to first shape handed to publish), most recent last.
+        self.latencies: deque[tuple[int, float]] = deque(maxlen=1000)
+        self.dropped = 0
+        self._last_error: str | None = None
+
+    # ---------------------------------------------------------------- control
+    def start(self) -> None:
+        self._running = True
+        self._thread = threading.Thread(target=self._loop, name="arapkit-solver", daemon=True)
+        self._thread.start()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        with self._cond:
+            self._running = False
+            self._pending = None
+            self._cond.notify_all()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+    def submit(self, req: SolveRequest) -> int:
+        """Queue ``req`` in place of any pending one; returns its sequence number."""
+        with self._cond:
+            self._seq += 1
+            req.seq = self._seq
+            if self._pending is not None:
+                self.dropped += 1
+            self._pending = req
+            self._cond.notify_all()
+            return req.seq
+
+    def reset_shape(self, vertices: np.ndarray | None, mesh: Any = None) -> None:
+        """Set the warm start for the next solve (e.g. after loading another mesh)."""
+        with self._cond:
+            self._shape = None if vertices is None else np.array(vertices, dtype=np.float64)
+            self._shape_mesh = mesh
+
+    def wait_idle(self, timeout: float = 30.0) -> bool:
+        """Block until no request is pending or running; ``False`` on timeout."""
+        deadline = time.monotonic() + timeout
+        with self._cond:
+            while self._pending is not None or self._busy:
+                left = deadline - time.monotonic()
+                if left <= 0:
+                    return False
+                self._cond.wait(left)
+        return True
+
+    @property
+    def has_newer(self) -> bool:
+        return self._pending is not None
+
+    # ---------------------------------------------------------------- thread
+    def _loop(self) -> None:
+        while True:
+            with self._cond:
+                while self._running and self._pending is None:
+                    self._cond.wait()
+                if not self._running:
+                    return
+                req, self._pending = self._pending, None
+                self._busy = True
+            try:
+                self._solve(req)
+            except Exception as exc:  # keep the thread alive: report and wait for the next
+                msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                # A bug repeats on every drag: print its traceback once, not 20 times a second.
+                if not _is_input_error(exc) and msg != self._last_error:
+                    traceback.print_exc()
+                self._last_error = msg
+                self._emit(req, self._start_shape(req), np.nan, 0, False, True, error=msg)
+            finally:
+                with self._cond:
+                    self._busy = False
+                    self._cond.notify_all()
+
+    def _start_shape(self, req: SolveRequest) -> np.ndarray:
+        if req.init is not None:
+            return np.asarray(req.init, dtype=np.float64)
+        if self._shape is not None and self._shape_mesh is req.mesh:
+            return self._shape
+        return np.asarray(req.mesh.vertices, dtype=np.float64)
+
+    def _emit(
+        self, req: SolveRequest, V: np.ndarray, energy: float, iters: int, converged: bool,
+        final: bool, **extra: Any,
+    ) -> None:
+        latency = (time.perf_counter() - req.t_submit) * 1e3
+        self._publish(
+            SolveUpdate(req.seq, req.mesh, V, float(energy), iters, converged, final, latency,
+                        **extra)
+        )
+
+    def _solve(self, req: SolveRequest) -> None:
+        if len(req.handles) == 0:
+            self._emit(req, self._start_shape(req), np.nan, 0, False, True,
+                       error="no handles: select vertices and make a handle")
+            return
+        t0 = time.perf_counter()
+        if req.settings.method == "laplacian":
+            self._solve_laplacian(req, t0)
+        else:
+            self._solve_arap(req, t0)
+
+    def _solve_laplacian(self, req: SolveRequest, t0: float) -> None:
+        ed = self._engine.laplacian_editor(req)
+        setup = (time.perf_counter() - t0) * 1e3
+        V = np.asarray(ed.solve(req.targets), dtype=np.float64)
+        self._keep(req, V)
+        self._emit(req, V, np.nan, 1, True, True, setup_ms=setup)
+        self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
+
+    def _solve_arap(self, req: SolveRequest, t0: float) -> None:
+        s = req.settings
+        d = self._engine.arap(req)
+        setup = (time.perf_counter() - t0) * 1e3
+        init = self._start_shape(req)
+        live = {"sent": False, "last": 0.0, "count": 0}
+
+        def callback(iteration: int, energy: float, vertices: np.ndarray) -> bool:
+            live["count"] += 1
+            now = time.perf_counter()
+            if not live["sent"]:
+                over_budget = (now - req.t_submit) * 1e3 >= s.live_budget_ms
+                if live["count"] >= s.live_max_iter or over_budget:
+                    self._emit(req, np.array(vertices), energy, live["count"], False, False,
+                               setup_ms=setup)
+                    self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
+                    live["sent"], live["last"] = True, time.perf_counter()
+                return False
+            # After the live update: stop for a newer drag, else report now and then.
+            if self.has_newer:
+                return True
+            if now - live["last"] >= self._interval:
+                self._emit(req, np.array(vertices), energy, live["count"], False, False)
+                live["last"] = time.perf_counter()
+            return False
+
+        res = d.solve(req.targets, init=init, tol=s.tol, max_iter=s.max_iter, callback=callback)
+        V = np.asarray(res.vertices, dtype=np.float64)
+        self._keep(req, V)
+        if self.has_newer and not res.converged and live["sent"]:
+            # Superseded: the newer request starts from V and will be shown in a moment;
+            # sending V now would only delay it.
+            return
+        self._emit(
+            req, V, res.energy, res.iterations, bool(res.converged), True,
+            vertex_energy=np.asarray(res.vertex_energy), setup_ms=setup,
+        )
+        if not live["sent"]:
+            self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
+
+    def _keep(self, req: SolveRequest, V: np.ndarray) -> None:
+        self._shape, self._shape_mesh = V, req.mesh
+
+
+def _is_input_error(exc: BaseException) -> bool:
+    from arapkit.errors import InputError
+
+    return isinstance(exc, InputError)

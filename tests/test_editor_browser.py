@@ -1,0 +1,213 @@
+"""The editor end to end: a real viser server, and (when available) a real headless browser.
+
+The browser test needs Debian's ``chromium`` at /usr/bin/chromium and Playwright for
+Python (no browser download); ``.ci/run`` installs both.  Without them it is skipped with
+the reason.  The server-side test runs everywhere.
+"""
+
+from __future__ import annotations
+
+import argparse
+import io
+import json
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from arapkit.cli.edit import build_state
+from arapkit.editor.app import EditorApp
+from arapkit.editor.state import CameraView
+
+CHROMIUM = Path("/usr/bin/chromium")
+CHROMIUM_ARGS = [
+    "--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
+    "--disable-background-networking", "--disable-component-update", "--disable-sync",
+]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return int(s.getsockname()[1])
+
+
+def bar_app(export_dir: Path) -> EditorApp:
+    """The editor on the built-in bar: left end frozen, right end ("free end") draggable."""
+    ns = argparse.Namespace(mesh=None, rings_file=None, rings=1, handles=None, session=None)
+    return EditorApp(build_state(ns), port=free_port(), export_dir=export_dir)
+
+
+def wait_for(cond, timeout: float, what: str) -> None:
+    deadline = time.monotonic() + timeout
+    while not cond():
+        if time.monotonic() > deadline:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+# ------------------------------------------------------------------ server side only
+
+
+def test_server_drag_paint_export_session(tmp_path):
+    app = bar_app(tmp_path / "out")
+    try:
+        assert app.url.startswith("http://127.0.0.1:")
+        assert app.wait_idle(120)
+        st = app.state
+        tip = st.handle("free end")
+        rest = app.served_vertices()[tip.vertices].copy()
+        start = tip.position.copy()
+        for k, phase in enumerate(["start", "update", "update", "end"]):
+            app.drag_handle("free end", (1, 0, 0, 0), start + [0, 0, 0.3 * k], phase)
+        assert app.wait_idle(120)
+        served = app.served_vertices()[tip.vertices]
+        assert np.allclose(served - rest, [0, 0, 0.9], atol=1e-5)  # float32 on the wire
+        u = app.last_update
+        assert u.final and u.converged and np.isfinite(u.energy) and u.energy > 0
+        assert st.can_undo  # the whole drag is one step
+        st.undo()
+        assert np.allclose(st.handle("free end").position, start)
+
+        # paint bucket from the page's tool entry point: the whole bar is one r region
+        n = app.apply_tool("Flood fill", st.mesh.vertices[600], face=None)
+        assert n == st.n and np.all(st.rings == 3)
+
+        paths = app.export()
+        assert [p.name for p in paths] == ["bar-deformed.ply", "bar-rings.txt"]
+        assert all(p.parent == (tmp_path / "out").resolve() and p.exists() for p in paths)
+        session = app.save_session()
+        assert session.name == "bar-session.json" and (tmp_path / "out" / "bar-rest.ply").exists()
+    finally:
+        app.stop()
+
+
+TETRA_OFF = b"OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n"
+
+
+def test_uploads_are_checked(tmp_path):
+    from arapkit.errors import InputError
+
+    app = bar_app(tmp_path / "out")
+    try:
+        app.max_upload_bytes = 1000
+        with pytest.raises(InputError, match=r"big\.off: 2.0 KB is over the 1000 bytes limit"):
+            app.open_mesh_bytes("big.off", b"OFF\n" + b"0" * 2044)
+        app.max_upload_bytes = 2**20
+        with pytest.raises(InputError, match=r"^notes\.txt: not a mesh file"):
+            app.open_mesh_bytes("notes.txt", b"hello")
+        with pytest.raises(InputError, match=r"^garbage\.off: ") as err:
+            app.open_mesh_bytes("garbage.off", b"OFF\n3 1 0\n0 0 0\n1 0 0\n")
+        assert "arapkit-upload" not in str(err.value)  # names the upload, not the temp file
+        assert app.state.n == 1154  # a bad file leaves the editor as it was
+
+        with pytest.raises(InputError, match="1154"):
+            app.load_rings_bytes("r.txt", b"1\n2\n")
+        rings = app.load_rings_bytes("r.txt", ("3\n" * 1154).encode())
+        assert np.all(rings == 3) and np.all(app.state.rings == 3)
+
+        session = app.state.to_dict()
+        app.state.undo()  # back to r = 1; the session brings r = 3 back
+        app.load_session_bytes("s.json", json.dumps(session).encode())
+        assert np.all(app.state.rings == 3)
+        with pytest.raises(InputError, match="arapkit edit --session"):
+            app.load_session_bytes("s.json", json.dumps({**session, "n_vertices": 4}).encode())
+
+        app.open_mesh_bytes("../../tetra.off", TETRA_OFF)
+        assert app.state.n == 4 and app.state.handles == []
+        assert app.state.mesh.name == "tetra"
+        assert "No handles yet" in app.md_status.content
+        assert app.export()[0] == (tmp_path / "out" / "tetra-deformed.ply").resolve()
+    finally:
+        app.stop()
+
+
+# ------------------------------------------------------------------ real browser
+
+
+def _browser_or_skip():
+    if not CHROMIUM.exists():
+        pytest.skip("Debian chromium not installed at /usr/bin/chromium "
+                    "(apt-get install chromium; .ci/run does this)")
+    sync_api = pytest.importorskip("playwright.sync_api",
+                                   reason="playwright for Python is not installed")
+    return sync_api.sync_playwright
+
+
+def _non_background_fraction(png: bytes) -> float:
+    from matplotlib.image import imread
+
+    img = imread(io.BytesIO(png), format="png")[..., :3]
+    background = img[2, 2]
+    return float(np.mean(np.abs(img - background).sum(axis=-1) > 0.1))
+
+
+def test_browser_drag_deforms_mesh(tmp_path):
+    sync_playwright = _browser_or_skip()
+    app = bar_app(tmp_path / "out")
+    try:
+        assert app.wait_idle(120)
+        st = app.state
+        tip = st.handle("free end")
+        before = app.served_vertices()[tip.vertices].copy()
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS,
+                                        headless=True)
+            try:
+                page = browser.new_page(viewport={"width": 1200, "height": 800})
+                page.goto(app.url)
+                page.wait_for_selector("canvas", timeout=30_000)
+                wait_for(lambda: len(app.server.get_clients()) == 1, 30, "the page to connect")
+                client = next(iter(app.server.get_clients().values()))
+
+                # Look at the free end from the front so its gizmo is easy to reach.
+                g = tip.position.copy()
+                eye = g + np.array([0.0, -4.0, 1.0])
+                # position first: moving the camera drags its look-at point along.
+                client.camera.position = tuple(eye)
+                client.camera.look_at = tuple(g)
+                wait_for(lambda: np.allclose(client.camera.look_at, g, atol=1e-3)
+                         and np.allclose(client.camera.position, eye, atol=1e-3), 30,
+                         "the camera to move")
+                canvas = page.locator("canvas").first
+                box = canvas.bounding_box()
+                # The scene area: left of the GUI panel, below the notifications.
+                scene = {"x": box["x"], "y": box["y"] + 160, "width": box["width"] - 360,
+                         "height": box["height"] - 160}
+                wait_for(lambda: _non_background_fraction(page.screenshot(clip=scene)) > 0.05,
+                         30, "the mesh to be drawn (canvas stays blank)")
+                page.screenshot(path=str(tmp_path / "before.png"))
+
+                # Grab the gizmo's z arrow halfway along and drag it upwards.
+                cam = client.camera
+                view = CameraView(np.asarray(cam.position), np.asarray(cam.wxyz),
+                                  float(cam.fov), float(cam.aspect))
+                arrow = g + 0.5 * 0.12 * app._diag * np.array([0.0, 0.0, 1.0])
+                uv, _ = view.project(arrow[None])
+                x = box["x"] + uv[0, 0] * box["width"]
+                y = box["y"] + uv[0, 1] * box["height"]
+                page.mouse.move(x, y)
+                page.mouse.down()
+                for k in range(1, 11):
+                    page.mouse.move(x, y - 10 * k)
+                    time.sleep(0.05)
+                page.mouse.up()
+                wait_for(lambda: st.handle("free end").position[2] > g[2] + 0.1, 30,
+                         "the gizmo drag to reach the server")
+                assert app.wait_idle(60)
+                time.sleep(1.0)
+                page.screenshot(path=str(tmp_path / "after.png"))
+            finally:
+                browser.close()
+        moved = st.handle("free end").position - g
+        served = app.served_vertices()[tip.vertices]
+        # the served tip follows the gizmo (mostly upwards), the energy is finite
+        assert moved[2] > 0.1
+        assert np.allclose(served - before, moved, atol=1e-4)
+        u = app.last_update
+        assert u.error is None and np.isfinite(u.energy) and u.energy > 0
+        assert st.can_undo
+    finally:
+        app.stop()
