@@ -117,8 +117,8 @@ def test_reported_energy_is_eq1(small_bar, r):
     w = edge_weights(m)
     rings = np.full(m.n_vertices, r)
     ref = brute_energy(m, w, rings, res.vertices, res.rotations)
-    assert res.energy == pytest.approx(ref, rel=1e-10)
-    assert res.history[-1] == pytest.approx(ref, rel=1e-9)
+    assert res.energy == res.history[-1] == pytest.approx(ref, rel=1e-9)
+    assert res.vertex_energy.sum() == pytest.approx(ref, rel=1e-12)
     # rotations are the best fit: they agree with numpy's SVD
     assert np.allclose(res.rotations, svd_rotations(m, w, rings, res.vertices), atol=1e-8)
 
@@ -227,8 +227,13 @@ def test_obtuse_real_mesh_factorises_and_clamp_keeps_rest():
     assert (edge_weights(m) < 0).any()
     res = Deformer(m, h, weights="cotan-clamped").solve(m.vertices[h])
     assert np.abs(res.vertices - m.vertices).max() < 1e-10 * m.bounding_box_diagonal
-    res = Deformer(m, h, weights="cotan").solve(m.vertices[h], max_iter=3)
+    d = Deformer(m, h, weights="cotan")
+    res = d.solve(m.vertices[h], max_iter=3)
     assert np.isfinite(res.vertices).all()
+    # the drift is real (rest is not a minimum) and the deformer says so
+    assert res.energy < 0 and np.abs(res.vertices - m.vertices).max() > 1e-3
+    assert any("not an energy minimum" in n and "cotan-clamped" in n for n in d.notes)
+    assert not Deformer(m, h, weights="cotan-clamped").notes
 
 
 def test_indefinite_system_names_remedy():

@@ -18,17 +18,31 @@ structure (stored in both orders), not Python loops.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 
-import numba as nb
-import numpy as np
+# Parallel regions here and in the solver are short and frequent. GNU OpenMP's default
+# busy-wait makes idle workers spin; on a machine shared with other processes that steals
+# the cores the working threads need (measured: 2-3x slower iterations). Must be set
+# before numba starts its OpenMP pool; an explicit user setting wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-from .errors import InputError
-from .mesh import Mesh
+import numba as nb  # noqa: E402
+import numpy as np  # noqa: E402
+
+from .errors import InputError  # noqa: E402
+from .mesh import Mesh  # noqa: E402
 
 MAX_RINGS = 100
 
-__all__ = ["MAX_RINGS", "Neighbourhoods", "build_neighbourhoods", "check_rings", "vertex_adjacency"]
+__all__ = [
+    "MAX_RINGS",
+    "Neighbourhoods",
+    "build_neighbourhoods",
+    "check_rings",
+    "neighbourhoods_from_arrays",
+    "vertex_adjacency",
+]
 
 
 def check_rings(rings, n_vertices: int, name: str = "rings") -> np.ndarray:
@@ -203,7 +217,7 @@ class Neighbourhoods:
     disk_ptr, disk_idx, disk_coef :
         vertices touched by N(k, r_k) (k first) and their coefficients ``c_kv`` (3 each).
     vdisk_ptr, vdisk_k, vdisk_coef :
-        the same entries grouped by vertex v (for the global right-hand side).
+        the same entries grouped by vertex v, or None when built with ``transpose=False``.
     edge_count : (E,) int
         d_e, the number of neighbourhoods containing each edge.
     """
@@ -215,9 +229,9 @@ class Neighbourhoods:
     disk_ptr: np.ndarray
     disk_idx: np.ndarray
     disk_coef: np.ndarray
-    vdisk_ptr: np.ndarray
-    vdisk_k: np.ndarray
-    vdisk_coef: np.ndarray
+    vdisk_ptr: np.ndarray | None
+    vdisk_k: np.ndarray | None
+    vdisk_coef: np.ndarray | None
     edge_count: np.ndarray
 
     def edges_of(self, k: int, r: int | None = None) -> np.ndarray:
@@ -246,7 +260,9 @@ def _chunks(n: int) -> int:
     return max(1, min(n, 4 * nb.get_num_threads()))
 
 
-def build_neighbourhoods(mesh: Mesh, weights: np.ndarray, rings) -> Neighbourhoods:
+def build_neighbourhoods(
+    mesh: Mesh, weights: np.ndarray, rings, *, transpose: bool = True
+) -> Neighbourhoods:
     """Breadth-first search of N(k, r_k) for every vertex, compiled and parallel.
 
     Parameters
@@ -256,6 +272,9 @@ def build_neighbourhoods(mesh: Mesh, weights: np.ndarray, rings) -> Neighbourhoo
         Weight of each edge of ``mesh.edges``.
     rings : int or (n,) int
         Neighbourhood size per vertex (>= 1).
+    transpose : bool
+        Also store the entries grouped by vertex (``vdisk_*``). The solver scatters the
+        right-hand side instead and skips them, which halves the memory.
 
     Examples
     --------
@@ -267,8 +286,28 @@ def build_neighbourhoods(mesh: Mesh, weights: np.ndarray, rings) -> Neighbourhoo
     True
     """
     n = mesh.n_vertices
-    r = check_rings(rings, n)
-    E = mesh.edges
+    return neighbourhoods_from_arrays(n, mesh.edges, mesh.vertices, weights,
+                                      check_rings(rings, n), transpose=transpose)
+
+
+def neighbourhoods_from_arrays(
+    n: int, edges: np.ndarray, P: np.ndarray, weights: np.ndarray, rings: np.ndarray,
+    *, transpose: bool = True,
+) -> Neighbourhoods:
+    """:func:`build_neighbourhoods` on raw arrays (any vertex numbering, e.g. a reordering).
+
+    ``edges`` need not be sorted; edge ids in the result index its rows.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> nb = neighbourhoods_from_arrays(3, np.array([[0, 1], [1, 2]]), np.eye(3),
+    ...                                 np.ones(2), np.ones(3, dtype=np.int32))
+    >>> nb.sizes.tolist()
+    [1, 2, 1]
+    """
+    E = np.asarray(edges)
+    r = np.asarray(rings, dtype=np.int32)
     ptr, nbr, eid = vertex_adjacency(n, E)
     nch = _chunks(n)
     nv, ne = _count(n, len(E), r, ptr, nbr, eid, nch)
@@ -276,7 +315,6 @@ def build_neighbourhoods(mesh: Mesh, weights: np.ndarray, rings) -> Neighbourhoo
     eptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(nv, out=vptr[1:])
     np.cumsum(ne, out=eptr[1:])
-    P = mesh.vertices
     W = np.ascontiguousarray(weights[:, None] * (P[E[:, 0]] - P[E[:, 1]]))
     disk_idx = np.empty(vptr[-1], dtype=np.int32)
     disk_coef = np.empty((vptr[-1], 3), dtype=np.float64)
@@ -284,7 +322,10 @@ def build_neighbourhoods(mesh: Mesh, weights: np.ndarray, rings) -> Neighbourhoo
     edge_layer = np.empty(eptr[-1], dtype=np.int8)
     _fill(n, r, ptr, nbr, eid, E, W, vptr, eptr, nch, disk_idx, disk_coef, edge_idx,
           edge_layer)
-    tptr, tk, tc = _transpose(n, vptr, disk_idx, disk_coef)
+    if transpose:
+        tptr, tk, tc = _transpose(n, vptr, disk_idx, disk_coef)
+    else:
+        tptr = tk = tc = None
     count = np.bincount(edge_idx, minlength=len(E))
     return Neighbourhoods(r, eptr, edge_idx, edge_layer, vptr, disk_idx, disk_coef,
                           tptr, tk, tc, count)

@@ -36,11 +36,11 @@ def bar(
     xs = np.linspace(0.0, length, nx + 1)
     ys = np.linspace(-width / 2, width / 2, ny + 1)
     zs = np.linspace(-height / 2, height / 2, nz + 1)
-    I, J, K = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij")
-    on_surface = (I == 0) | (I == nx) | (J == 0) | (J == ny) | (K == 0) | (K == nz)
-    index = -np.ones(I.shape, dtype=np.int64)
+    gi, gj, gk = np.meshgrid(np.arange(nx + 1), np.arange(ny + 1), np.arange(nz + 1), indexing="ij")
+    on_surface = (gi == 0) | (gi == nx) | (gj == 0) | (gj == ny) | (gk == 0) | (gk == nz)
+    index = -np.ones(gi.shape, dtype=np.int64)
     index[on_surface] = np.arange(on_surface.sum())
-    V = np.stack([xs[I[on_surface]], ys[J[on_surface]], zs[K[on_surface]]], axis=1)
+    V = np.stack([xs[gi[on_surface]], ys[gj[on_surface]], zs[gk[on_surface]]], axis=1)
     faces = []
     centre = np.array([length / 2, 0.0, 0.0])
     for axis, n_axis in ((0, nx), (1, ny), (2, nz)):
