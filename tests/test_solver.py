@@ -244,3 +244,22 @@ def test_indefinite_system_names_remedy():
     with pytest.raises(InputError, match="not positive definite.*cotan-clamped"):
         CholeskyFactor(sp.csr_matrix(np.array([[1.0, 2.0], [2.0, 1.0]])), "m.off",
                        "; use weights='cotan-clamped'")
+
+
+def test_bar_r1_bends_smoothly():
+    """Rotations along the bar's bottom centre line turn steadily from 0 to 180 degrees.
+
+    Guards the rank-one tie-break of the rotation kernel: an arbitrary pick among equally
+    good rotations makes r = 1 kink at a few cross-sections instead of bending evenly.
+    """
+    m = bar()
+    h, t = bar_bend(m, 180)
+    res = Deformer(m, h, rings=1).solve(t)
+    V = m.vertices
+    line = np.flatnonzero((np.abs(V[:, 1]) < 1e-9) & (np.abs(V[:, 2] + 0.2) < 1e-9))
+    line = line[np.argsort(V[line, 0])]
+    R = res.rotations[line]
+    theta = np.degrees(np.arctan2(R[:, 2, 0], R[:, 0, 0]))
+    assert np.all(np.diff(theta) > 0), np.diff(theta).min()
+    assert theta[0] < 5 and theta[-1] > 175
+    assert np.abs(R[:, 1, 1] - 1).max() < 1e-6  # every turn is about the y axis
