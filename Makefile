@@ -27,3 +27,6 @@ lint: $(STAMP)
 
 clean:
 	rm -rf $(VENV) demo-output .pytest_cache
+	# numba caches are keyed on their own file only: a kernel inlined from another
+	# module (rotations into solver) keeps a stale copy until the cache is removed
+	find src -name "*.nbi" -delete -o -name "*.nbc" -delete

@@ -27,20 +27,25 @@ def data_dir() -> Path:
     return data_path()
 
 
-def independent_ring_edges(mesh: Mesh, k: int, r: int) -> set[tuple[int, int]]:
-    """Edges reachable by a path of at most r edges from k: one endpoint within r - 1."""
-    nbrs = {v: set() for v in range(mesh.n_vertices)}
+def bfs_distances(mesh: Mesh, k: int) -> dict[int, int]:
+    """Edge-graph distance from k to every vertex it reaches (plain BFS, test reference)."""
+    nbrs: dict[int, list[int]] = {v: [] for v in range(mesh.n_vertices)}
     for i, j in mesh.edges.tolist():
-        nbrs[i].add(j)
-        nbrs[j].add(i)
-    dist = {k: 0}
-    q = deque([k])
-    while q:
-        u = q.popleft()
+        nbrs[i].append(j)
+        nbrs[j].append(i)
+    dist, queue = {k: 0}, deque([k])
+    while queue:
+        u = queue.popleft()
         for v in nbrs[u]:
             if v not in dist:
                 dist[v] = dist[u] + 1
-                q.append(v)
+                queue.append(v)
+    return dist
+
+
+def independent_ring_edges(mesh: Mesh, k: int, r: int) -> set[tuple[int, int]]:
+    """Edges reachable by a path of at most r edges from k: one endpoint within r - 1."""
+    dist = bfs_distances(mesh, k)
     return {
         (i, j) for i, j in mesh.edges.tolist()
         if min(dist.get(i, 1 << 30), dist.get(j, 1 << 30)) <= r - 1

@@ -614,9 +614,7 @@ def test_dispatch_error_handling_in_process(monkeypatch, capsys):
     table = []
     for name, (exc, _) in cases.items():
         monkeypatch.setitem(sys.modules, f"fake.{name}", _fake_command(f"fake.{name}", exc))
-        table.append((name, f"fake.{name}", True))
-    # optional commands whose module is absent are skipped, not fatal
-    table.append(("learnish", "arapkit.cli.no_such_module", False))
+        table.append((name, f"fake.{name}"))
     monkeypatch.setattr(cli, "COMMANDS", table)
     for name, (_, code) in cases.items():
         assert cli.main([name]) == code, name
@@ -630,7 +628,7 @@ def test_dispatch_error_handling_in_process(monkeypatch, capsys):
         if name == "fake_bug":
             assert "Traceback" in err and "internal error (RuntimeError: boom)" in err
     assert cli.main(["learnish"]) == 2  # not registered: argparse usage error
-    # a required module that is missing is a packaging bug and must not be hidden
-    monkeypatch.setattr(cli, "COMMANDS", [("x", "arapkit.cli.no_such_module", True)])
+    # a command module that is missing is a packaging bug and must not be hidden
+    monkeypatch.setattr(cli, "COMMANDS", [("x", "arapkit.cli.no_such_module")])
     with pytest.raises(ModuleNotFoundError):
         cli.build_parser()

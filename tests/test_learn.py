@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
 import pytest
-from conftest import data_path
+from conftest import bfs_distances, data_path
 
 from arapkit import InputError, Mesh, learn_rings
 from arapkit.cli import main
@@ -57,21 +55,6 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
 
 
 # -- independent reference computation ------------------------------------------------------
-
-
-def bfs_distances(mesh: Mesh, k: int) -> dict[int, int]:
-    nbrs: dict[int, list[int]] = {v: [] for v in range(mesh.n_vertices)}
-    for i, j in mesh.edges.tolist():
-        nbrs[i].append(j)
-        nbrs[j].append(i)
-    dist, queue = {k: 0}, deque([k])
-    while queue:
-        u = queue.popleft()
-        for v in nbrs[u]:
-            if v not in dist:
-                dist[v] = dist[u] + 1
-                queue.append(v)
-    return dist
 
 
 def brute_force(mesh: Mesh, example: np.ndarray, k: int, r: int) -> tuple[float, float, float]:

@@ -46,7 +46,6 @@ Examples
 
 from __future__ import annotations
 
-import inspect
 import time
 import warnings
 from collections.abc import Sequence
@@ -206,11 +205,8 @@ def _ring_energy_kernel(n, r_min, r_max, edges, edge_ptr, edge_idx, edge_layer, 
 
 def _neighbourhoods(mesh: Mesh, w: np.ndarray, r_max: int):
     """One BFS to r_max for every vertex (the engine's), without the solver-only extras."""
-    # the per-vertex regrouping (vdisk_*) serves the solver's right-hand side only; skip it
-    # where the engine offers that (keyword added alongside this module)
-    if "transpose" in inspect.signature(build_neighbourhoods).parameters:
-        return build_neighbourhoods(mesh, w, r_max, transpose=False)
-    return build_neighbourhoods(mesh, w, r_max)
+    # the per-vertex regrouping (vdisk_*) serves the solver's right-hand side only
+    return build_neighbourhoods(mesh, w, r_max, transpose=False)
 
 
 def _chunks(n: int) -> int:

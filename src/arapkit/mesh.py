@@ -96,6 +96,8 @@ class Mesh:
 
     def _check_faces(self, faces) -> np.ndarray:
         n = len(self.vertices)
+        if not isinstance(faces, np.ndarray) and len(faces) and all(len(f) == 3 for f in faces):
+            faces = np.asarray(faces)
         if isinstance(faces, np.ndarray) and faces.ndim == 2:
             polys = None
             F = faces
@@ -140,9 +142,11 @@ class Mesh:
         scale = np.max(np.ptp(V, axis=0)) if len(V) > 1 else 1.0
         zero_area = (dbl_area <= 1e-14 * max(scale, 1e-300) ** 2) & ~repeated_vertex
         key = np.sort(F, axis=1)
-        _, first = np.unique(key, axis=0, return_index=True)
-        duplicate = np.ones(len(F), dtype=bool)
-        duplicate[first] = False
+        order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))
+        same = np.all(key[order[1:]] == key[order[:-1]], axis=1)
+        duplicate = np.zeros(len(F), dtype=bool)
+        # lexsort is stable: within a run of equal faces the earliest comes first and stays
+        duplicate[order[1:][same]] = True
         duplicate &= ~repeated_vertex & ~zero_area
         for mask, what, key in (
             (repeated_vertex, "repeat a vertex", "repeated_vertex"),
@@ -184,18 +188,24 @@ class Mesh:
         return np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
 
     @cached_property
+    def _edge_keys(self) -> tuple[np.ndarray, np.ndarray]:
+        """``i * n + j`` of every half edge (i < j) and the sorted unique keys."""
+        he = self._half_edges
+        n = np.int64(self.n_vertices)
+        keys = np.minimum(he[:, 0], he[:, 1]) * n + np.maximum(he[:, 0], he[:, 1])
+        return keys, np.unique(keys)
+
+    @cached_property
     def edges(self) -> np.ndarray:
         """Unique undirected edges ``(i, j)`` with ``i < j``, sorted lexicographically."""
-        he = np.sort(self._half_edges, axis=1)
-        return np.unique(he, axis=0)
+        ukeys = self._edge_keys[1]
+        n = self.n_vertices
+        return np.stack([ukeys // n, ukeys % n], axis=1)
 
     @cached_property
     def edge_face_counts(self) -> np.ndarray:
         """Number of faces on each edge of :attr:`edges` (1 = boundary, >2 = non-manifold)."""
-        he = np.sort(self._half_edges, axis=1)
-        n = self.n_vertices
-        keys = he[:, 0] * n + he[:, 1]
-        ekeys = self.edges[:, 0] * n + self.edges[:, 1]
+        keys, ekeys = self._edge_keys
         return np.bincount(np.searchsorted(ekeys, keys), minlength=len(ekeys))
 
     @cached_property
@@ -274,6 +284,20 @@ def _read_bytes(path: str) -> tuple[bytes, str]:
     return data, ext
 
 
+def _uniform_block(rows: list[list[str]], kind: type) -> np.ndarray | None:
+    """Rows of equal length as one array (one C-level conversion), else None."""
+    if not rows:
+        return None
+    width = len(rows[0])
+    flat = [t for row in rows for t in row]
+    if len(flat) != width * len(rows) or any(len(r) != width for r in rows):
+        return None
+    try:
+        return np.array(flat, dtype=np.float64 if kind is float else np.int64).reshape(-1, width)
+    except ValueError:
+        return None
+
+
 def _parse_off(text: str, path: str) -> tuple[np.ndarray, list[list[int]]]:
     """Strict OFF reader: header counts are checked, so a truncated file is caught."""
     tokens_lines = []
@@ -294,6 +318,12 @@ def _parse_off(text: str, path: str) -> tuple[np.ndarray, list[list[int]]]:
             f"{path}: truncated: header promises {nv} vertices and {nf} faces, "
             f"file has {len(body)} data lines"
         )
+    fast = _uniform_block(body[:nv], float)
+    if fast is not None and fast.shape[1] >= 3:
+        V = fast[:, :3]
+        tri = _uniform_block(body[nv : nv + nf], int)
+        if tri is not None and tri.shape[1] >= 4 and (tri[:, 0] == 3).all():
+            return V, tri[:, 1:4]
     try:
         V = np.array([[float(t) for t in row[:3]] for row in body[:nv]], dtype=np.float64)
         faces = []

@@ -1,8 +1,7 @@
 """The ``arapkit`` command line.
 
 Subcommands live in their own modules, each exposing ``add_parser(subparsers)`` and
-``run(args) -> int``; :data:`COMMANDS` lists them. Optional commands (``learn``, ``edit``)
-are skipped when their module is not installed.
+``run(args) -> int``; :data:`COMMANDS` lists them.
 
 Exit status: 0 success, 2 bad input (one line on stderr, ``arapkit: error: ...``),
 1 internal error (with a traceback, since it is a bug), 130 interrupted.
@@ -23,19 +22,18 @@ import os
 import sys
 import traceback
 from collections.abc import Sequence
-from types import ModuleType
 
 from arapkit.errors import InputError
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
-#: (subcommand, module, required). Optional modules may be absent from an installation.
-COMMANDS: list[tuple[str, str, bool]] = [
-    ("deform", "arapkit.cli.deform", True),
-    ("demo", "arapkit.cli.demo", True),
-    ("info", "arapkit.cli.info", True),
-    ("learn", "arapkit.cli.learn", False),
-    ("edit", "arapkit.cli.edit", False),
+#: (subcommand, module): each module exposes ``add_parser(subparsers)`` and ``run(args)``.
+COMMANDS: list[tuple[str, str]] = [
+    ("deform", "arapkit.cli.deform"),
+    ("demo", "arapkit.cli.demo"),
+    ("info", "arapkit.cli.info"),
+    ("learn", "arapkit.cli.learn"),
+    ("edit", "arapkit.cli.edit"),
 ]
 
 _EPILOG = """examples:
@@ -53,16 +51,6 @@ def _version() -> str:
         return version("arapkit")
     except Exception:  # not installed (running from a source tree)
         return "unknown"
-
-
-def _load_command(module: str, required: bool) -> ModuleType | None:
-    try:
-        return importlib.import_module(module)
-    except ModuleNotFoundError as e:
-        # only the command's own module may be missing; a broken import inside it is a bug
-        if not required and e.name == module:
-            return None
-        raise
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -83,10 +71,8 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--version", action="version", version=f"arapkit {_version()}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
-    for name, module, required in COMMANDS:
-        mod = _load_command(module, required)
-        if mod is None:
-            continue
+    for name, module in COMMANDS:
+        mod = importlib.import_module(module)
         sp = mod.add_parser(sub)
         sp.set_defaults(_run=mod.run, command=name)
     return parser
