@@ -632,3 +632,29 @@ def test_dispatch_error_handling_in_process(monkeypatch, capsys):
     monkeypatch.setattr(cli, "COMMANDS", [("x", "arapkit.cli.no_such_module")])
     with pytest.raises(ModuleNotFoundError):
         cli.build_parser()
+
+
+@needs_data
+def test_indefinite_system_keeps_stdout_clean(tmp_path):
+    """A scan whose cotangent system is indefinite: exit 2, one error line, nothing on stdout.
+
+    CHOLMOD prints its own warning with printf before cholespy raises; it must not reach
+    stdout (which carries results only) nor add a second line on stderr.
+    """
+    h = tmp_path / "h.json"
+    h.write_text(json.dumps([
+        {"name": "feet", "box": {"min": [-10, -4, -10], "max": [10, -3.5, 10]}},
+        {"name": "head", "nearest": {"point": [0, 4, 0], "k": 30}, "translate": [0.5, 0, 0]},
+    ]))
+    mesh = MESHES / "npm_snowden_lo.obj"
+    proc = arapkit("deform", mesh, "--handles", h, "--rings", 2, "-o", tmp_path / "o.ply",
+                   "--quiet")
+    assert proc.returncode == 2
+    assert proc.stdout == ""
+    assert "not positive definite" in error_line(proc) and "cotan-clamped" in error_line(proc)
+    assert "CHOLMOD" not in proc.stderr
+    # the remedy it names works
+    ok = arapkit("deform", mesh, "--handles", h, "--rings", 2, "--weights", "cotan-clamped",
+                 "-o", tmp_path / "o.ply", "--quiet")
+    assert ok.returncode == 0, ok.stderr
+    assert (tmp_path / "o.ply").exists()

@@ -522,6 +522,16 @@ def _tokens(path: Path) -> list[str]:
     return out
 
 
+def _int_tokens(path: Path, what: str) -> np.ndarray:
+    """The whitespace-separated integers of a text file; a non-integer names itself."""
+    toks = _tokens(path)
+    try:
+        return np.array([int(t) for t in toks], dtype=np.int64)
+    except ValueError:
+        bad = next(t for t in toks if not t.lstrip("+-").isdigit())
+        raise InputError(f"{path}: {what} {bad!r} is not an integer") from None
+
+
 def load_def(path: str | os.PathLike) -> np.ndarray:
     """Read a ``.def`` file: a 4x4 affine matrix acting on column vectors ``[x, y, z, 1]``.
 
@@ -578,12 +588,7 @@ def load_sel(
     """
     path = Path(path)
     V = np.asarray(vertices, dtype=np.float64)
-    toks = _tokens(path)
-    try:
-        status = np.array([int(t) for t in toks], dtype=np.int64)
-    except ValueError:
-        bad = next(t for t in toks if not t.lstrip("+-").isdigit())
-        raise InputError(f"{path}: status {bad!r} is not an integer") from None
+    status = _int_tokens(path, "status")
     if len(status) != len(V):
         raise InputError(f"{path}: {len(status)} vertex statuses for a mesh of {len(V)} vertices")
     fixed, moved = np.flatnonzero(status == 0), np.flatnonzero(status == 2)
@@ -708,12 +713,7 @@ def load_rings(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
     elif name.endswith((".ply", ".ply.gz")):
         values = _rings_from_ply(path)
     else:
-        toks = _tokens(path)
-        try:
-            values = np.array([int(t) for t in toks], dtype=np.int64)
-        except ValueError:
-            bad = next(t for t in toks if not t.lstrip("+-").isdigit())
-            raise InputError(f"{path}: rigidity value {bad!r} is not an integer") from None
+        values = _int_tokens(path, "rigidity value")
     return _validate_rings(values, int(n_vertices), path)
 
 

@@ -23,6 +23,7 @@ energy never increases.
 from __future__ import annotations
 
 import os
+import sys
 import time
 from collections.abc import Callable
 from contextlib import contextmanager
@@ -319,21 +320,42 @@ def laplacian_matrix(n: int, edges: np.ndarray, w: np.ndarray) -> sp.csr_matrix:
     return sp.csr_matrix((vals, (rows, cols)), shape=(n, n))
 
 
-@contextmanager
-def _quiet_stderr():
-    """Silence C-level stderr (CHOLMOD prints warnings before raising)."""
+def _flush_c_stdio() -> None:
+    """Flush the C library's stdio buffers (CHOLMOD's printf output sits there)."""
     try:
-        fd = os.dup(2)
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # no libc symbols on this platform: nothing to flush
+        pass
+
+
+@contextmanager
+def _quiet_c_output():
+    """Silence C-level stdout and stderr: CHOLMOD prints a warning before cholespy raises.
+
+    stdout must carry results only (the command line pipes it), so the warning is flushed
+    into /dev/null before the streams are restored.
+    """
+    sys.stdout.flush()
+    sys.stderr.flush()
+    try:
+        saved = [os.dup(1), os.dup(2)]
     except OSError:
         yield
         return
     try:
         with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
             os.dup2(null.fileno(), 2)
-            yield
+            try:
+                yield
+            finally:
+                _flush_c_stdio()
     finally:
-        os.dup2(fd, 2)
-        os.close(fd)
+        for fd, target in zip(saved, (1, 2)):
+            os.dup2(fd, target)
+            os.close(fd)
 
 
 class CholeskyFactor:
@@ -357,7 +379,7 @@ class CholeskyFactor:
         self.n = A.shape[0]
         CholeskyFactor.count += 1
         try:
-            with _quiet_stderr():
+            with _quiet_c_output():
                 self._solver = CholeskySolverD(
                     self.n,
                     A.row.astype(np.int32),

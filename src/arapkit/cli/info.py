@@ -124,7 +124,9 @@ def _advice(f: dict[str, Any]) -> list[str]:
     if f["negative_cotan_weights"]:
         out.append(
             f"{f['negative_cotan_weights']} negative cotangent weight(s) (obtuse triangles): "
-            "usually harmless; if factorisation fails, use --weights cotan-clamped"
+            "the rest shape may then not be an energy minimum (it drifts even with every "
+            "handle in place) or the system may not factorise; --weights cotan-clamped "
+            "avoids both"
         )
     if not out:
         out.append("no problems found: a closed, clean, single-component surface")
