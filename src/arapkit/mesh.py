@@ -189,24 +189,30 @@ class Mesh:
 
     @cached_property
     def _edge_keys(self) -> tuple[np.ndarray, np.ndarray]:
-        """``i * n + j`` of every half edge (i < j) and the sorted unique keys."""
+        """Sorted unique keys ``i * n + j`` (i < j) and the edge id of every half edge."""
         he = self._half_edges
         n = np.int64(self.n_vertices)
         keys = np.minimum(he[:, 0], he[:, 1]) * n + np.maximum(he[:, 0], he[:, 1])
-        return keys, np.unique(keys)
+        ukeys, inverse = np.unique(keys, return_inverse=True)
+        return ukeys, inverse
 
     @cached_property
     def edges(self) -> np.ndarray:
         """Unique undirected edges ``(i, j)`` with ``i < j``, sorted lexicographically."""
-        ukeys = self._edge_keys[1]
+        ukeys = self._edge_keys[0]
         n = self.n_vertices
         return np.stack([ukeys // n, ukeys % n], axis=1)
+
+    @property
+    def face_edges(self) -> np.ndarray:
+        """(m, 3) id in :attr:`edges` of edge ``(F[f, c], F[f, c+1])`` of each face."""
+        return self._edge_keys[1].reshape(3, -1).T
 
     @cached_property
     def edge_face_counts(self) -> np.ndarray:
         """Number of faces on each edge of :attr:`edges` (1 = boundary, >2 = non-manifold)."""
-        keys, ekeys = self._edge_keys
-        return np.bincount(np.searchsorted(ekeys, keys), minlength=len(ekeys))
+        ukeys, inverse = self._edge_keys
+        return np.bincount(inverse, minlength=len(ukeys))
 
     @cached_property
     def adjacency(self) -> sp.csr_matrix:

@@ -57,14 +57,9 @@ def cotangent_weights(mesh: Mesh) -> np.ndarray:
     """
     F = mesh.faces
     cots = _corner_cotangents(mesh.vertices, F)
-    n = mesh.n_vertices
-    ekeys = mesh.edges[:, 0] * n + mesh.edges[:, 1]
-    w = np.zeros(len(ekeys))
-    for c in range(3):
-        i, j = F[:, (c + 1) % 3], F[:, (c + 2) % 3]
-        keys = np.minimum(i, j) * n + np.maximum(i, j)
-        np.add.at(w, np.searchsorted(ekeys, keys), 0.5 * cots[:, c])
-    return w
+    # the edge opposite corner c is face edge c+1, from corner c+1 to corner c+2
+    opposite = np.roll(mesh.face_edges, -1, axis=1)
+    return np.bincount(opposite.ravel(), 0.5 * cots.ravel(), minlength=len(mesh.edges))
 
 
 def edge_weights(mesh: Mesh, kind: str = "cotan") -> np.ndarray:
@@ -123,6 +118,4 @@ def voronoi_areas(mesh: Mesh) -> np.ndarray:
     obtuse = cots < 0
     any_obtuse = obtuse.any(axis=1)
     contrib[any_obtuse] = np.where(obtuse[any_obtuse], 0.5, 0.25) * area[any_obtuse, None]
-    A = np.zeros(mesh.n_vertices)
-    np.add.at(A, F.ravel(), contrib.ravel())
-    return A
+    return np.bincount(F.ravel(), contrib.ravel(), minlength=mesh.n_vertices)
