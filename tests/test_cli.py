@@ -658,3 +658,26 @@ def test_indefinite_system_keeps_stdout_clean(tmp_path):
                  "-o", tmp_path / "o.ply", "--quiet")
     assert ok.returncode == 0, ok.stderr
     assert (tmp_path / "o.ply").exists()
+
+
+def test_accelerate_flag_reaches_the_solver(tmp_path, bar_file):
+    """--accelerate gives a monotone history and about the plain result's energy."""
+    mesh_path, V, _ = bar_file
+    base, tip = caps(V)
+    h = tmp_path / "h.json"
+    h.write_text(json.dumps([{"name": "base", "indices": base.tolist()},
+                             {"name": "tip", "indices": tip.tolist(), "translate": [0, 0, 2]}]))
+    reports = {}
+    for flag in ([], ["--accelerate"]):
+        rep = tmp_path / f"r{len(flag)}.json"
+        proc = arapkit("deform", mesh_path, "--handles", h, "--rings", 2, "--tol", 1e-6,
+                       "-o", tmp_path / f"o{len(flag)}.ply", "--report", rep, "--quiet", *flag)
+        assert proc.returncode == 0, proc.stderr
+        reports[bool(flag)] = json.loads(rep.read_text())
+    acc = reports[True]
+    assert acc["parameters"]["accelerate"] is True
+    assert "accel_rejected" in acc["timings"]  # the accelerated loop ran
+    H = np.array(acc["result"]["energy_history"])
+    assert np.all(np.diff(H) <= 1e-10 * H[0])
+    plain = reports[False]["result"]["energy"]
+    assert acc["result"]["energy"] == pytest.approx(plain, rel=1e-3)

@@ -114,6 +114,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="start from the rest shape (paper) or Laplacian editing (default identity)",
     )
     p.add_argument(
+        "--accelerate",
+        action="store_true",
+        help="Anderson acceleration with an energy safeguard: fewer, costlier iterations "
+        "(pays on large meshes; see docs/benchmarks.md)",
+    )
+    p.add_argument(
         "-o",
         "--output",
         required=True,
@@ -184,6 +190,7 @@ def _report(args, mesh, hs, rings, res, wall_s: float) -> dict[str, Any]:
             "tol": args.tol,
             "max_iter": args.max_iter,
             "init": args.init,
+            "accelerate": args.accelerate,
         },
         "handles": {
             "count": len(hs.indices),
@@ -226,8 +233,9 @@ def run(args: argparse.Namespace) -> int:
         tol=args.tol,
         max_iter=args.max_iter,
         init=args.init,
+        accelerate=args.accelerate,
     )
-    for msg in getattr(deformer, "notes", []) or []:
+    for msg in deformer.notes:
         note(f"{args.mesh}: {msg}", args.quiet)
     with Progress(disable=args.quiet) as progress:
         res = deformer.solve(hs.targets, callback=progress)
