@@ -168,6 +168,7 @@ def test_deform_json_with_every_selection_kind(tmp_path, bar_file):
         "tol": 1e-3,
         "max_iter": 300,
         "init": "identity",
+        "accelerate": False,
     }
     assert [g["name"] for g in report["handles"]["groups"]] == ["base", "tip", "mid", "near"]
     assert report["handles"]["count"] == len(base) + len(tip) + 9 + 3
