@@ -14,7 +14,15 @@ Examples
 True
 """
 
-from .errors import InputError
+import os
+
+# Parallel regions in the kernels are short and frequent. GNU OpenMP's default busy-wait
+# makes idle workers spin; on a machine shared with other processes that steals the cores
+# the working threads need (measured: 2-3x slower iterations). It must be set before numba
+# starts its OpenMP pool (at the first parallel call); an explicit user setting wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+
+from .errors import InputError  # noqa: E402
 from .laplacian import LaplacianEditor, laplacian_edit
 from .learn import LearnedRings, learn_rings
 from .mesh import Mesh, load_mesh

@@ -18,20 +18,13 @@ structure (stored in both orders), not Python loops.
 
 from __future__ import annotations
 
-import os
 from dataclasses import dataclass
 
-# Parallel regions here and in the solver are short and frequent. GNU OpenMP's default
-# busy-wait makes idle workers spin; on a machine shared with other processes that steals
-# the cores the working threads need (measured: 2-3x slower iterations). Must be set
-# before numba starts its OpenMP pool; an explicit user setting wins.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+import numba as nb
+import numpy as np
 
-import numba as nb  # noqa: E402
-import numpy as np  # noqa: E402
-
-from .errors import InputError  # noqa: E402
-from .mesh import Mesh  # noqa: E402
+from .errors import InputError
+from .mesh import Mesh
 
 MAX_RINGS = 100
 
