@@ -86,6 +86,19 @@ def _jacobi_angle(app: float, aqq: float, apq: float) -> tuple[float, float, flo
 
 
 @_inline
+def _apply(
+    s00: float, s01: float, s02: float, s10: float, s11: float, s12: float,
+    s20: float, s21: float, s22: float, x: float, y: float, z: float,
+) -> tuple[float, float, float]:
+    # S (row major) times the column (x, y, z)
+    return (
+        s00 * x + s01 * y + s02 * z,
+        s10 * x + s11 * y + s12 * z,
+        s20 * x + s21 * y + s22 * z,
+    )
+
+
+@_inline
 def _rotate(
     c: float, s: float, x0: float, x1: float, x2: float, y0: float, y1: float, y2: float
 ) -> tuple[float, float, float, float, float, float]:
@@ -306,12 +319,10 @@ def _finish_regular(
     # u_1, u_2 from Gram-Schmidt on S v_1, S v_2.  Valid when sigma_2 is not tiny
     # relative to sigma_1, so that S v_2 is far from zero and already nearly
     # orthogonal to u_1: a single projection keeps |u_1 . u_2| at rounding level.
-    b00 = s00 * v00 + s01 * v10 + s02 * v20
-    b10 = s10 * v00 + s11 * v10 + s12 * v20
-    b20 = s20 * v00 + s21 * v10 + s22 * v20
-    b01 = s00 * v01 + s01 * v11 + s02 * v21
-    b11 = s10 * v01 + s11 * v11 + s12 * v21
-    b21 = s20 * v01 + s21 * v11 + s22 * v21
+    b00, b10, b20 = _apply(
+        s00, s01, s02, s10, s11, s12, s20, s21, s22, v00, v10, v20)
+    b01, b11, b21 = _apply(
+        s00, s01, s02, s10, s11, s12, s20, s21, s22, v01, v11, v21)
     n = 1.0 / math.sqrt(b00 * b00 + b10 * b10 + b20 * b20)
     u00, u10, u20 = b00 * n, b10 * n, b20 * n
     p = u00 * b01 + u10 * b11 + u20 * b21
@@ -346,15 +357,12 @@ def _finish_degenerate(
     # sigma_2 << sigma_1: the (v_2, v_3) plane from the Gram matrix is only accurate to
     # ~eps sigma_1^2 / sigma_2^2, so re-diagonalise that plane with a one-sided Jacobi
     # rotation on the columns S v_2, S v_3 (relative accuracy eps sigma_1 / sigma_2).
-    b00 = s00 * v00 + s01 * v10 + s02 * v20
-    b10 = s10 * v00 + s11 * v10 + s12 * v20
-    b20 = s20 * v00 + s21 * v10 + s22 * v20
-    b01 = s00 * v01 + s01 * v11 + s02 * v21
-    b11 = s10 * v01 + s11 * v11 + s12 * v21
-    b21 = s20 * v01 + s21 * v11 + s22 * v21
-    b02 = s00 * v02 + s01 * v12 + s02 * v22
-    b12 = s10 * v02 + s11 * v12 + s12 * v22
-    b22 = s20 * v02 + s21 * v12 + s22 * v22
+    b00, b10, b20 = _apply(
+        s00, s01, s02, s10, s11, s12, s20, s21, s22, v00, v10, v20)
+    b01, b11, b21 = _apply(
+        s00, s01, s02, s10, s11, s12, s20, s21, s22, v01, v11, v21)
+    b02, b12, b22 = _apply(
+        s00, s01, s02, s10, s11, s12, s20, s21, s22, v02, v12, v22)
     al = b01 * b01 + b11 * b11 + b21 * b21
     be = b02 * b02 + b12 * b12 + b22 * b22
     ga = b01 * b02 + b11 * b12 + b21 * b22
@@ -510,9 +518,15 @@ def _fit_lanes(src: np.ndarray, dst: np.ndarray, redo: np.ndarray) -> None:
 
 
 @nb.njit(cache=True, error_model="numpy")
-def _fit_range(S: np.ndarray, R: np.ndarray, lo: int, hi: int) -> None:
-    # R[lo:hi] from S[lo:hi], _LANES matrices at a time.  Kept out of the prange body
-    # (and the scalar fallback out of line) to keep compilation of _fit_all quick.
+def fit_rotation_range(S: np.ndarray, R: np.ndarray, lo: int, hi: int) -> None:
+    """Write ``R[lo:hi]`` from ``S[lo:hi]``, vectorised across blocks of matrices.
+
+    The serial building block of :func:`fit_rotations`, for compiled callers that run
+    their own parallel loop (the solver's fused local step). Degenerate matrices go to
+    :func:`rotation_from_covariance`. ``R`` may be ``S``.
+    """
+    # Kept out of the prange body (and the scalar fallback out of line) to keep
+    # compilation of _fit_all quick.
     src = np.empty(9 * _LANES)
     dst = np.empty(9 * _LANES)
     redo = np.empty(_LANES, dtype=np.bool_)
@@ -544,7 +558,7 @@ def _fit_range(S: np.ndarray, R: np.ndarray, lo: int, hi: int) -> None:
 def _fit_all(S: np.ndarray, R: np.ndarray) -> None:
     n = S.shape[0]
     for c in nb.prange((n + _CHUNK - 1) // _CHUNK):
-        _fit_range(S, R, c * _CHUNK, min(n, (c + 1) * _CHUNK))
+        fit_rotation_range(S, R, c * _CHUNK, min(n, (c + 1) * _CHUNK))
 
 
 def fit_rotations(S: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:

@@ -42,16 +42,7 @@ from .rings import (
     check_rings,
     neighbourhoods_from_arrays,
 )
-from .rotations import rotation_from_covariance
-
-try:  # the vectorised block kernel behind fit_rotations (R[lo:hi] from S[lo:hi])
-    from .rotations import _fit_range as fit_range
-except ImportError:  # pragma: no cover - older rotations module: one matrix at a time
-
-    @nb.njit(cache=True)
-    def fit_range(S, R, lo, hi):
-        for k in range(lo, hi):
-            rotation_from_covariance(S[k], R[k])
+from .rotations import fit_rotation_range
 from .weights import edge_weights
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "laplacian_matrix"]
@@ -108,7 +99,7 @@ def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w
             S[k, 0, 0], S[k, 0, 1], S[k, 0, 2] = s00, s01, s02
             S[k, 1, 0], S[k, 1, 1], S[k, 1, 2] = s10, s11, s12
             S[k, 2, 0], S[k, 2, 1], S[k, 2, 2] = s20, s21, s22
-        fit_range(S, R, k0, k1)
+        fit_rotation_range(S, R, k0, k1)
         off = win_off[c] - win_lo[c]
         for q in range(win_off[c], win_off[c + 1]):
             buf[q, 0] = 0.0
