@@ -13,7 +13,8 @@ neighbourhood's *disk* (the vertices its edges touch) carries the coefficient ve
 
 with which the local-step covariance is ``S_k = sum_v c_kv p'_v^T`` and the global
 right-hand side is ``b_v = sum_k R_k c_kv``: both are sparse products over the same
-structure (stored in both orders), not Python loops.
+structure, not Python loops. The solver scatters ``b`` from the per-k order; the copy grouped
+by v (``transpose=True``) is for callers that gather instead.
 """
 
 from __future__ import annotations
