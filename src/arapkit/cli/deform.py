@@ -27,6 +27,7 @@ from arapkit.cli.common import (
     rings_summary,
 )
 from arapkit.errors import InputError
+from arapkit.weights import WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
 
@@ -37,15 +38,6 @@ EXAMPLES = [
     "arapkit deform bar.off --handles bar.json -o out.ply --report - --quiet | jq .result",
 ]
 _FIGURE_FORMATS = ("png", "pdf", "svg", "jpg", "jpeg")
-
-
-def _weight_kinds() -> tuple[str, ...]:
-    try:
-        from arapkit.weights import WEIGHT_KINDS
-
-        return tuple(WEIGHT_KINDS)
-    except ImportError:  # keep --help working even if the engine cannot be imported
-        return ("cotan", "cotan-clamped", "uniform")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -87,7 +79,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="FILE",
         help="per-vertex r: text (one integer per line), .npy, or PLY vertex property 'rings'",
     )
-    kinds = _weight_kinds()
+    kinds = WEIGHT_KINDS
     p.add_argument(
         "--weights",
         default="cotan",

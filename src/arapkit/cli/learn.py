@@ -32,6 +32,7 @@ import numpy as np
 
 from arapkit.cli.common import add_example_epilog, load_mesh_checked, positive_int
 from arapkit.errors import InputError
+from arapkit.weights import WEIGHT_KINDS
 
 __all__ = ["Frames", "add_parser", "expand_frames", "load_frames", "parse_omega", "run"]
 
@@ -64,12 +65,6 @@ def parse_omega(text: str) -> float | str:
     return value
 
 
-def _weight_kinds() -> tuple[str, ...]:
-    from arapkit.weights import WEIGHT_KINDS
-
-    return tuple(WEIGHT_KINDS)
-
-
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
     """Register ``learn`` with its options."""
     p = subparsers.add_parser(
@@ -98,7 +93,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--omega", type=parse_omega, default="auto", metavar="W",
                    help="rigidity preference: a number (the paper uses 0.3) or 'auto', the "
                    "mean energy increment per ring (default auto)")
-    kinds = _weight_kinds()
+    kinds = WEIGHT_KINDS
     p.add_argument("--weights", default="cotan", choices=kinds,
                    help=f"edge weights: {', '.join(kinds)} (default cotan, as the paper)")
     p.add_argument("--figure", metavar="FILE",
