@@ -58,7 +58,7 @@ from .errors import InputError
 from .mesh import Mesh
 from .rings import MAX_RINGS, build_neighbourhoods
 from .rotations import rotation_from_covariance
-from .weights import edge_weights, voronoi_areas
+from .weights import DEFAULT_WEIGHTS, edge_weights, voronoi_areas
 
 __all__ = [
     "AUTO_FLOOR",
@@ -278,7 +278,7 @@ def ring_energies(
     examples,
     r_min: int = 1,
     r_max: int = 6,
-    weights: str | np.ndarray = "cotan",
+    weights: str | np.ndarray = DEFAULT_WEIGHTS,
     per_example: bool = False,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
     """Normalised r-ring ARAP energies of every vertex (the table the paper minimises).
@@ -474,7 +474,7 @@ def learn_rings(
     r_min: int = 1,
     r_max: int = 6,
     omega: float | str = PAPER_OMEGA,
-    weights: str = "cotan",
+    weights: str = DEFAULT_WEIGHTS,
 ) -> LearnedRings:
     """Learn a per-vertex ring size from example shapes (Chen et al. 2017, sec. 3.4).
 

@@ -43,7 +43,7 @@ from .rings import (
     neighbourhoods_from_arrays,
 )
 from .rotations import fit_rotation_range
-from .weights import edge_weights
+from .weights import DEFAULT_WEIGHTS, edge_weights
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "laplacian_matrix"]
 
@@ -516,7 +516,7 @@ class Deformer:
         mesh: Mesh,
         handles,
         rings=1,
-        weights: str = "cotan",
+        weights: str = DEFAULT_WEIGHTS,
         *,
         tol: float = 1e-3,
         max_iter: int = 1000,

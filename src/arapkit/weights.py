@@ -20,9 +20,18 @@ import numpy as np
 from .errors import InputError
 from .mesh import Mesh
 
-__all__ = ["WEIGHT_KINDS", "COT_CAP", "edge_weights", "cotangent_weights", "voronoi_areas"]
+__all__ = [
+    "WEIGHT_KINDS",
+    "DEFAULT_WEIGHTS",
+    "COT_CAP",
+    "edge_weights",
+    "cotangent_weights",
+    "voronoi_areas",
+]
 
 WEIGHT_KINDS = ("cotan", "cotan-clamped", "uniform")
+#: the weighting every interface uses unless the user names another
+DEFAULT_WEIGHTS = "cotan"
 COT_CAP = 1e5
 CLAMP_FRACTION = 1e-3
 
@@ -62,7 +71,7 @@ def cotangent_weights(mesh: Mesh) -> np.ndarray:
     return np.bincount(opposite.ravel(), 0.5 * cots.ravel(), minlength=len(mesh.edges))
 
 
-def edge_weights(mesh: Mesh, kind: str = "cotan") -> np.ndarray:
+def edge_weights(mesh: Mesh, kind: str = DEFAULT_WEIGHTS) -> np.ndarray:
     """Weight of every edge of ``mesh.edges`` for the given policy.
 
     Parameters

@@ -27,7 +27,7 @@ from arapkit.cli.common import (
     rings_summary,
 )
 from arapkit.errors import InputError
-from arapkit.weights import WEIGHT_KINDS
+from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
 
@@ -82,9 +82,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     kinds = WEIGHT_KINDS
     p.add_argument(
         "--weights",
-        default="cotan",
+        default=DEFAULT_WEIGHTS,
         choices=kinds,
-        help=f"edge weights: {', '.join(kinds)} (default cotan)",
+        help=f"edge weights: {', '.join(kinds)} (default {DEFAULT_WEIGHTS})",
     )
     p.add_argument(
         "--tol",

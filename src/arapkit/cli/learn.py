@@ -32,7 +32,7 @@ import numpy as np
 
 from arapkit.cli.common import add_example_epilog, load_mesh_checked, positive_int
 from arapkit.errors import InputError
-from arapkit.weights import WEIGHT_KINDS
+from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["Frames", "add_parser", "expand_frames", "load_frames", "parse_omega", "run"]
 
@@ -94,8 +94,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    help="rigidity preference: a number (the paper uses 0.3) or 'auto', the "
                    "mean energy increment per ring (default auto)")
     kinds = WEIGHT_KINDS
-    p.add_argument("--weights", default="cotan", choices=kinds,
-                   help=f"edge weights: {', '.join(kinds)} (default cotan, as the paper)")
+    p.add_argument("--weights", default=DEFAULT_WEIGHTS, choices=kinds,
+                   help=f"edge weights: {', '.join(kinds)} (default {DEFAULT_WEIGHTS})")
     p.add_argument("--figure", metavar="FILE",
                    help="the reference coloured by r, r_min blue ... r_max red (.png, .pdf, .svg)")
     p.add_argument("--ply", metavar="FILE", help="the reference as PLY with a 'rings' property")

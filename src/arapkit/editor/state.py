@@ -42,6 +42,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
 from arapkit.errors import InputError
+from arapkit.weights import DEFAULT_WEIGHTS
 
 SESSION_FORMAT = "arapkit-editor-session"
 SESSION_VERSION = 1
@@ -258,7 +259,7 @@ class SolverSettings:
     """
 
     method: str = "arap"
-    weights: str = "cotan"
+    weights: str = DEFAULT_WEIGHTS
     tol: float = 1e-3
     max_iter: int = 200
     live_max_iter: int = 8
