@@ -9,7 +9,7 @@ from conftest import bfs_distances, data_path
 from arapkit import InputError, Mesh, learn_rings
 from arapkit.cli import main
 from arapkit.learn import AUTO_FLOOR, auto_omega, ring_energies, select_rings
-from arapkit.weights import edge_weights, voronoi_areas
+from arapkit.weights import DEFAULT_WEIGHTS, edge_weights, voronoi_areas
 
 JOINT, HALF = 4.0, 0.6  # the limb bends over x in [JOINT - HALF, JOINT + HALF]
 
@@ -57,11 +57,12 @@ def random_rotation(rng: np.random.Generator) -> np.ndarray:
 # -- independent reference computation ------------------------------------------------------
 
 
-def brute_force(mesh: Mesh, example: np.ndarray, k: int, r: int) -> tuple[float, float, float]:
+def brute_force(mesh: Mesh, example: np.ndarray, k: int, r: int,
+                weights: str = DEFAULT_WEIGHTS) -> tuple[float, float, float]:
     """E(k, r, m) straight from the definition, A(k, r), and the energy's scale."""
     dist = bfs_distances(mesh, k)
     far = 1 << 30
-    E, w = mesh.edges, edge_weights(mesh)
+    E, w = mesh.edges, edge_weights(mesh, weights)
     sel = np.array([min(dist.get(i, far), dist.get(j, far)) <= r - 1 for i, j in E.tolist()])
     e1 = mesh.vertices[E[sel, 0]] - mesh.vertices[E[sel, 1]]
     em = example[E[sel, 0]] - example[E[sel, 1]]
@@ -77,13 +78,14 @@ def brute_force(mesh: Mesh, example: np.ndarray, k: int, r: int) -> tuple[float,
     return energy, area, scale
 
 
-def check_against_brute_force(mesh: Mesh, examples: np.ndarray, ks: list[int]) -> None:
-    mean, areas, raw = ring_energies(mesh, examples, 1, 6, per_example=True)
+def check_against_brute_force(mesh: Mesh, examples: np.ndarray, ks: list[int],
+                              weights: str = DEFAULT_WEIGHTS) -> None:
+    mean, areas, raw = ring_energies(mesh, examples, 1, 6, weights=weights, per_example=True)
     assert raw is not None and raw.shape == (mesh.n_vertices, 6, len(examples))
     for k in ks:
         for r in range(1, 7):
             for m, ex in enumerate(examples):
-                energy, area, scale = brute_force(mesh, ex, k, r)
+                energy, area, scale = brute_force(mesh, ex, k, r, weights)
                 assert raw[k, r - 1, m] == pytest.approx(energy, abs=1e-10 * scale), (k, r, m)
                 assert areas[k, r - 1] == pytest.approx(area, rel=1e-12)
             assert mean[k, r - 1] == pytest.approx(np.mean(raw[k, r - 1]) / areas[k, r - 1],
@@ -103,13 +105,15 @@ def test_energies_match_brute_force_on_limb(limb):
     check_against_brute_force(mesh, examples, [0, ends, 330, 345])
 
 
-def test_energies_match_brute_force_on_panda():
-    """A real skinned mesh with many obtuse triangles (negative cotangent weights)."""
+@pytest.mark.parametrize("weights", ["cotan", DEFAULT_WEIGHTS])
+def test_energies_match_brute_force_on_panda(weights):
+    """A real skinned mesh with many obtuse triangles (negative raw cotangent weights)."""
     data = np.load(data_path("sequences", "panda_walk_seq.npz"))
     V, F = data["V"], data["F"]
     mesh = Mesh(V[0], F)
-    assert (edge_weights(mesh) < 0).any()  # the case where E may be negative
-    check_against_brute_force(mesh, V[[7, 30]], [0, 123, 600])
+    # raw cotan: the case where E may be negative; the default has positive weights only
+    assert (edge_weights(mesh, weights) < 0).any() == (weights == "cotan")
+    check_against_brute_force(mesh, V[[7, 30]], [0, 123, 600], weights)
 
 
 def test_example_batches_give_the_same_table(limb, monkeypatch):

@@ -31,7 +31,7 @@ def test_voronoi_matches_libigl():
 def test_hand_values_right_triangle():
     m = Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
     # angles: 90 at 0, 45 at 1 and 2 -> cot 0, 1, 1; edge (1,2) faces the right angle
-    w = dict(zip(map(tuple, m.edges.tolist()), edge_weights(m)))
+    w = dict(zip(map(tuple, m.edges.tolist()), edge_weights(m, "cotan")))
     assert w[(1, 2)] == pytest.approx(0.0, abs=1e-15)
     assert w[(0, 1)] == pytest.approx(0.5) and w[(0, 2)] == pytest.approx(0.5)
     # right triangle: circumcentre on the hypotenuse; areas 1/4, 1/8, 1/8 (Meyer's mixed rule)
@@ -41,7 +41,7 @@ def test_hand_values_right_triangle():
 def test_obtuse_clamped_and_uniform():
     V = [[0, 0, 0], [2, 0, 0], [1, 0.1, 0], [1, -0.1, 0]]
     m = Mesh(V, [[0, 1, 2], [1, 0, 3]])
-    w = dict(zip(map(tuple, m.edges.tolist()), edge_weights(m)))
+    w = dict(zip(map(tuple, m.edges.tolist()), edge_weights(m, "cotan")))
     assert w[(0, 1)] < 0  # two very obtuse angles face the shared edge
     wc = edge_weights(m, "cotan-clamped")
     assert (wc > 0).all()
@@ -52,5 +52,5 @@ def test_obtuse_clamped_and_uniform():
 
 def test_bar_weights_positive():
     # a box of right isosceles triangles: every cotangent is 0 or 1
-    w = edge_weights(bar())
+    w = edge_weights(bar(), "cotan")
     assert set(np.round(w, 12).tolist()) <= {0.0, 0.5, 1.0}

@@ -1,7 +1,9 @@
-"""Exception raised for bad user input.
+"""Exception raised for bad user input, and messages worded for the interface that shows them.
 
 Every message is one line that names the file, vertex, handle or group at fault,
-so the command line can print it as is and exit with status 2.
+so the command line can print it as is and exit with status 2. A message that tells the
+user to change an option is an :class:`Advice`: Python code reads ``weights='cotan'``,
+the command line ``--weights cotan`` and the editor its Solver panel.
 """
 
 from __future__ import annotations
@@ -17,3 +19,79 @@ class InputError(ValueError):
     ...
     arapkit.errors.InputError: bar.off: face 3 references vertex 99 (mesh has 10)
     """
+
+
+#: the interfaces a message can be worded for
+INTERFACES = ("python", "cli", "editor")
+
+
+def option(name: str, value: str, interface: str = "python") -> str:
+    """How a user sets option ``name`` to ``value`` in the given interface.
+
+    Examples
+    --------
+    >>> option("weights", "cotan-clamped"), option("weights", "cotan-clamped", "cli")
+    ("weights='cotan-clamped'", '--weights cotan-clamped')
+    >>> option("weights", "cotan-clamped", "editor")
+    "weights 'cotan-clamped' in the Solver panel"
+    """
+    if interface == "cli":
+        return f"--{name.replace('_', '-')} {value}"
+    if interface == "editor":
+        return f"{name} '{value}' in the Solver panel"
+    return f"{name}={value!r}"
+
+
+class Advice(str):
+    """A message that names an option, worded for Python until asked otherwise.
+
+    The library raises and records messages in Python's words (``weights='cotan'``); the
+    command line and the editor show the same message with their own control
+    (``--weights cotan``, the Solver panel) through :func:`worded_for`.
+
+    Examples
+    --------
+    >>> a = Advice("the shape drifts; use {weights}", weights="cotan-clamped")
+    >>> str(a)
+    "the shape drifts; use weights='cotan-clamped'"
+    >>> a.worded_for("cli")
+    'the shape drifts; use --weights cotan-clamped'
+    """
+
+    def __new__(cls, template: str, **options: str) -> Advice:
+        self = super().__new__(cls, cls._fill(template, options, "python"))
+        self._template = template
+        self._options = options
+        return self
+
+    @staticmethod
+    def _fill(template: str, options: dict[str, str], interface: str) -> str:
+        return template.format(**{k: option(k, v, interface) for k, v in options.items()})
+
+    def worded_for(self, interface: str) -> str:
+        """The message with each option named as ``interface`` sets it."""
+        return self._fill(self._template, self._options, interface)
+
+    def after(self, prefix: str) -> Advice:
+        """This advice with plain text in front (the text is kept verbatim).
+
+        Examples
+        --------
+        >>> Advice("use {weights}", weights="uniform").after("x.off: ").worded_for("cli")
+        'x.off: use --weights uniform'
+        """
+        escaped = prefix.replace("{", "{{").replace("}", "}}")
+        return Advice(escaped + self._template, **self._options)
+
+
+def worded_for(message: object, interface: str) -> str:
+    """``message`` worded for ``interface`` when it is :class:`Advice`, else ``str(message)``.
+
+    Examples
+    --------
+    >>> worded_for(InputError(Advice("use {weights}", weights="uniform")).args[0], "cli")
+    'use --weights uniform'
+    >>> worded_for("plain text", "cli")
+    'plain text'
+    """
+    return message.worded_for(interface) if isinstance(message, Advice) else str(message)

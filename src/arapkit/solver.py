@@ -34,7 +34,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .accel import Anderson
-from .errors import InputError
+from .errors import Advice, InputError
 from .mesh import Mesh
 from .rings import (
     Neighbourhoods,
@@ -43,7 +43,7 @@ from .rings import (
     neighbourhoods_from_arrays,
 )
 from .rotations import fit_rotation_range
-from .weights import DEFAULT_WEIGHTS, edge_weights
+from .weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS, edge_weights
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "laplacian_matrix"]
 
@@ -363,7 +363,7 @@ class CholeskyFactor:
     #: factorisations done by all instances (lets tests prove that new targets never refactorise)
     count = 0
 
-    def __init__(self, A: sp.spmatrix, what: str, remedy: str = "") -> None:
+    def __init__(self, A: sp.spmatrix, what: str, remedy: str | Advice = "") -> None:
         from cholespy import CholeskySolverD, MatrixType
 
         A = sp.coo_matrix(A)
@@ -379,8 +379,9 @@ class CholeskyFactor:
                     MatrixType.COO,
                 )
         except ValueError:
+            msg = f"{what}: the system matrix is not positive definite"
             raise InputError(
-                f"{what}: the system matrix is not positive definite{remedy}"
+                remedy.after(msg) if isinstance(remedy, Advice) else msg + remedy
             ) from None
 
     def solve(self, B: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
@@ -548,6 +549,7 @@ class Deformer:
         self.factorisations = 0
         t0 = time.perf_counter()
         self.w = edge_weights(mesh, weights)
+        self._nonneg = bool((self.w >= 0).all())
         n = mesh.n_vertices
         if reorder and n > 1:
             self._perm = bandwidth_order(mesh)
@@ -610,21 +612,37 @@ class Deformer:
 
         With all weights >= 0 every rest covariance is positive semi-definite, its best
         rotation is the identity and the energy at rest is 0. Negative cotangent weights
-        (obtuse triangles) can make the best-fit energy at rest negative: the shape then
-        drifts even when every handle stays in place.
+        (raw ``weights="cotan"`` on obtuse triangles) can make the best-fit energy at rest
+        negative: the shape then drifts even when every handle stays in place. Only then
+        is there something worth telling the user.
         """
-        if (self.w >= 0).all():
+        if self.energy_is_sum_of_squares:
             return []
         R = np.empty((self.mesh.n_vertices, 3, 3))
         E_rest = self._local(self._P0.copy(), R)
         if E_rest >= -1e-9 * abs(self._rest_term):
             return []
         bad = int(np.count_nonzero(np.abs(R - np.eye(3)).max(axis=(1, 2)) > 1e-6))
-        return [
+        return [Advice(
             f"{int((self.w < 0).sum())} edges have negative cotangent weights and the rest "
             f"shape is not an energy minimum ({bad} neighbourhoods prefer a rotation at rest): "
-            "the shape can drift even where handles stay put; use weights='cotan-clamped'"
-        ]
+            "the shape drifts even where handles stay put and the energy can be negative; "
+            "use {weights} (positive weights)", weights=SOUND_WEIGHTS,
+        )]
+
+    @property
+    def energy_is_sum_of_squares(self) -> bool:
+        """Whether every weight is >= 0, so that eq. (1) is a sum of squares (E >= 0).
+
+        False only for raw cotangent weights on meshes with obtuse triangles.
+
+        Examples
+        --------
+        >>> from arapkit.shapes import bar
+        >>> Deformer(bar(), [0]).energy_is_sum_of_squares
+        True
+        """
+        return self._nonneg
 
     @property
     def notes(self) -> list[str]:
@@ -706,10 +724,9 @@ class Deformer:
             shape=(nf, nc),
         )
         remedy = (
-            " (obtuse triangles give negative cotangent weights); "
-            "use weights='cotan-clamped' or weights='uniform'"
-            if self.weights_kind == "cotan"
-            else ""
+            Advice(" (obtuse triangles give negative cotangent weights); use {weights}",
+                   weights=SOUND_WEIGHTS)
+            if not self._nonneg else ""
         )
         if nf:
             A = sp.coo_matrix((vals, (rows, cols)), shape=(nf, nf))
@@ -727,7 +744,10 @@ class Deformer:
                    self._up_ptr, self._up_idx, self._up_w, self._S, R, self._buf,
                    self._win_lo, self._win_off, self._partial)
         tr, quad = self._partial.sum(axis=0)
-        return float(quad + self._rest_term - 2.0 * tr)
+        E = float(quad + self._rest_term - 2.0 * tr)
+        # with weights >= 0, E is a sum of squares: a negative value is the round-off of
+        # the expanded form, and the user must never be shown one
+        return max(E, 0.0) if self._nonneg else E
 
     def _rhs(self, fixed_rhs: np.ndarray, rhs: np.ndarray) -> None:
         """Right-hand side of the free vertices from the last local step."""

@@ -1,15 +1,20 @@
 """Edge weights (cotangent, uniform) and mixed Voronoi vertex areas.
 
-Policy for bad cotangents
--------------------------
-* ``"cotan"`` (default, paper eq. 2): ``w_ij = (cot a_ij + cot b_ij) / 2`` exactly. Each
-  cotangent is capped at ``COT_CAP`` in absolute value so that needle triangles give large
-  but finite weights. Obtuse triangles can make weights negative; the reduced system is
-  usually still positive definite. If it is not, the solver stops with an
-  :class:`~arapkit.errors.InputError` that names the remedy (``weights="cotan-clamped"``).
-* ``"cotan-clamped"``: as ``"cotan"``, then every weight below ``CLAMP_FRACTION`` times the
-  mean absolute weight is raised to that floor, which keeps the Laplacian an M-matrix (always
-  positive definite after constraints) at the price of a small bias on obtuse meshes.
+Weight kinds
+------------
+* ``"cotan-clamped"`` (the default, :data:`DEFAULT_WEIGHTS`): the cotangent weights below,
+  then every weight below ``CLAMP_FRACTION`` times the mean absolute weight is raised to
+  that floor. Every weight is positive, so eq. (1) is a sum of squares (E >= 0), the rest
+  shape is an exact minimum (no drift when the handles stay put) and the reduced system is
+  positive definite for every r. Where the mesh has no obtuse triangles it equals
+  ``"cotan"`` up to the floor. ``docs/weights.md`` has the measurements (against raw
+  cotangents and intrinsic-Delaunay weights) this choice was made from.
+* ``"cotan"`` (paper eq. 2): ``w_ij = (cot a_ij + cot b_ij) / 2`` exactly. Each cotangent is
+  capped at ``COT_CAP`` in absolute value so that needle triangles give large but finite
+  weights. Obtuse triangles make weights negative: the energy can then be negative, the
+  rest shape can drift, and the reduced system can be indefinite, in which case the solver
+  stops with an :class:`~arapkit.errors.InputError` that names the remedy. Kept for the
+  paper's experiments and for agreement with libigl.
 * ``"uniform"``: ``w_ij = 1``.
 """
 
@@ -23,6 +28,7 @@ from .mesh import Mesh
 __all__ = [
     "WEIGHT_KINDS",
     "DEFAULT_WEIGHTS",
+    "SOUND_WEIGHTS",
     "COT_CAP",
     "edge_weights",
     "cotangent_weights",
@@ -30,8 +36,10 @@ __all__ = [
 ]
 
 WEIGHT_KINDS = ("cotan", "cotan-clamped", "uniform")
-#: the weighting every interface uses unless the user names another
-DEFAULT_WEIGHTS = "cotan"
+#: the weighting every interface uses unless the user names another (see docs/weights.md)
+DEFAULT_WEIGHTS = "cotan-clamped"
+#: what messages suggest when raw cotangent weights misbehave
+SOUND_WEIGHTS = "cotan-clamped"
 COT_CAP = 1e5
 CLAMP_FRACTION = 1e-3
 

@@ -23,7 +23,7 @@ import sys
 import traceback
 from collections.abc import Sequence
 
-from arapkit.errors import InputError
+from arapkit.errors import InputError, worded_for
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
@@ -111,7 +111,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         return int(args._run(args) or 0)
     except InputError as e:
-        return _fail(str(e), 2)
+        return _fail(worded_for(e.args[0] if e.args else e, "cli"), 2)
     except FileNotFoundError as e:
         return _fail(f"{e.filename}: file not found", 2)
     except IsADirectoryError as e:

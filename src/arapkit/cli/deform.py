@@ -26,7 +26,7 @@ from arapkit.cli.common import (
     positive_int,
     rings_summary,
 )
-from arapkit.errors import InputError
+from arapkit.errors import InputError, worded_for
 from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
@@ -158,7 +158,8 @@ def _rings(args: argparse.Namespace, n_vertices: int) -> np.ndarray | int:
     return int(args.rings)
 
 
-def _report(args, mesh, hs, rings, res, wall_s: float) -> dict[str, Any]:
+def _report(args, mesh, hs, rings, res, wall_s: float,
+            sum_of_squares: bool = True) -> dict[str, Any]:
     from arapkit.cli import _version
 
     r = np.broadcast_to(np.asarray(rings), (mesh.n_vertices,))
@@ -194,6 +195,11 @@ def _report(args, mesh, hs, rings, res, wall_s: float) -> dict[str, Any]:
             "iterations": res.iterations,
             "converged": res.converged,
             "energy": res.energy,
+            # False only for raw cotangent weights with negative values (obtuse triangles)
+            "energy_is_sum_of_squares": sum_of_squares,
+            **({} if sum_of_squares else {"energy_note": (
+                "raw cotangent weights have negative values on this mesh: the energy is not "
+                "a sum of squares and can be negative")}),
             "energy_history": list(res.history),
             "max_handle_error": float(
                 np.max(np.linalg.norm(res.vertices[hs.indices] - hs.targets, axis=1))
@@ -228,7 +234,7 @@ def run(args: argparse.Namespace) -> int:
         accelerate=args.accelerate,
     )
     for msg in deformer.notes:
-        note(f"{args.mesh}: {msg}", args.quiet)
+        note(f"{args.mesh}: {worded_for(msg, 'cli')}", args.quiet)
     with Progress(disable=args.quiet) as progress:
         res = deformer.solve(hs.targets, callback=progress)
     if not res.converged:
@@ -246,7 +252,7 @@ def run(args: argparse.Namespace) -> int:
         mesh.faces,
         {"energy": res.vertex_energy, "rings": r_full.astype(np.int32)},
     )
-    report = _report(args, mesh, hs, r_full, res, wall)
+    report = _report(args, mesh, hs, r_full, res, wall, deformer.energy_is_sum_of_squares)
     if args.report and args.report != "-":
         write_json(args.report, report)
     if args.figure:

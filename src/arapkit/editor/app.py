@@ -396,9 +396,10 @@ class EditorApp:
             (ms for seq, ms in reversed(self.worker.latencies) if seq == u.seq), u.latency_ms)
         shown = f"first shape **{first:.0f} ms** after the move{setup}"
         total = f" · final after {u.latency_ms:.0f} ms" if u.final else ""
+        notes = "".join(f"  \n_{n}_" for n in u.notes)
         self._status(
             f"**{method}** · iterations **{u.iterations}** · energy **{energy}** · {phase}  \n"
-            f"{shown}{total}"
+            f"{shown}{total}{notes}"
         )
 
     def _status(self, text: str) -> None:

@@ -43,8 +43,10 @@ from typing import Any
 import numpy as np
 
 from arapkit.editor.state import SolverSettings
+from arapkit.errors import worded_for
+from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
-LAPLACIAN_WEIGHTS = ("cotan", "uniform")
+LAPLACIAN_WEIGHTS = WEIGHT_KINDS
 
 
 @dataclasses.dataclass
@@ -81,6 +83,8 @@ class SolveUpdate:
     vertex_energy: np.ndarray | None = None
     error: str | None = None
     setup_ms: float = 0.0
+    #: what the deformer says about the input, worded for the editor (e.g. raw cotangent drift)
+    notes: tuple[str, ...] = ()
 
 
 class _Engine:
@@ -115,7 +119,7 @@ class _Engine:
     def laplacian_editor(self, req: SolveRequest) -> Any:
         from arapkit import LaplacianEditor
 
-        w = req.settings.weights if req.settings.weights in LAPLACIAN_WEIGHTS else "cotan"
+        w = req.settings.weights if req.settings.weights in LAPLACIAN_WEIGHTS else DEFAULT_WEIGHTS
         key = (id(req.mesh), w, req.handles.tobytes())
         if self.laplacian is None or key != self._lap_key:
             self.laplacian = LaplacianEditor(req.mesh, req.handles, weights=w)
@@ -212,7 +216,8 @@ class SolveWorker:
             try:
                 self._solve(req)
             except Exception as exc:  # keep the thread alive: report and wait for the next
-                msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+                text = worded_for(exc.args[0], "editor") if exc.args else str(exc)
+                msg = text.splitlines()[0] if text else type(exc).__name__
                 # A bug repeats on every drag: print its traceback once, not 20 times a second.
                 if not _is_input_error(exc) and msg != self._last_error:
                     traceback.print_exc()
@@ -295,6 +300,7 @@ class SolveWorker:
         self._emit(
             req, V, res.energy, res.iterations, bool(res.converged), True,
             vertex_energy=np.asarray(res.vertex_energy), setup_ms=setup,
+            notes=tuple(worded_for(n, "editor") for n in d.notes),
         )
         if not live["sent"]:
             self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
