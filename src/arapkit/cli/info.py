@@ -118,15 +118,14 @@ def _advice(f: dict[str, Any]) -> list[str]:
     if f["needle_faces"]:
         out.append(
             f"{f['needle_faces']} near-degenerate face(s) (an angle below {NEEDLE_DEGREES:g} "
-            "degree): cotangents are capped; use --weights cotan-clamped or uniform if the "
-            "result shows spikes"
+            "degree): cotangents are capped; try --weights uniform if the result shows spikes"
         )
     if f["negative_cotan_weights"]:
         out.append(
-            f"{f['negative_cotan_weights']} negative cotangent weight(s) (obtuse triangles): "
-            "the rest shape may then not be an energy minimum (it drifts even with every "
-            "handle in place) or the system may not factorise; --weights cotan-clamped "
-            "avoids both"
+            f"{f['negative_cotan_weights']} negative raw cotangent weight(s) (obtuse "
+            "triangles): the default weights (cotan-clamped) raise them to a small positive "
+            "floor; with --weights cotan (the paper's) the rest shape may drift and the "
+            "system may not factorise"
         )
     if not out:
         out.append("no problems found: a closed, clean, single-component surface")
