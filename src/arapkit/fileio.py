@@ -40,6 +40,8 @@ __all__ = [
     "MESH_FORMATS",
     "atomic_open",
     "atomic_write",
+    "FIGURE_FORMATS",
+    "check_figure_format",
     "check_output_path",
     "mesh_format",
     "read_ply_vertex_properties",
@@ -50,6 +52,24 @@ __all__ = [
 
 #: Output mesh formats, by extension (a ``.gz`` suffix may follow any of them).
 MESH_FORMATS = ("ply", "obj", "off", "stl", "glb")
+#: Figure formats every figure writer accepts (matplotlib writes them all).
+FIGURE_FORMATS = ("png", "pdf", "svg", "jpg", "jpeg")
+
+
+def check_figure_format(path: str | os.PathLike) -> str:
+    """The figure format named by ``path``'s extension, or a one-line error.
+
+    Examples
+    --------
+    >>> check_figure_format("fig.PDF")
+    'pdf'
+    """
+    fmt = Path(path).suffix.lower().lstrip(".")
+    if fmt not in FIGURE_FORMATS:
+        raise InputError(f"{path}: unsupported figure format '.{fmt}' (use "
+                         + ", ".join("." + f for f in FIGURE_FORMATS[:-1])
+                         + f" or .{FIGURE_FORMATS[-1]})")
+    return fmt
 
 _PLY_TYPES = {
     np.dtype(np.float64): "double",

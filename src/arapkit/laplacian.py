@@ -15,9 +15,9 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
+from .constraints import Elimination, anchor_components, check_handles, check_targets
 from .errors import InputError
 from .mesh import Mesh
-from .solver import CholeskyFactor, anchor_components, check_handles, check_targets
 from .weights import DEFAULT_WEIGHTS, edge_weights, voronoi_areas
 
 __all__ = ["LaplacianEditor", "laplacian_edit", "differential_operator"]
@@ -86,16 +86,13 @@ class LaplacianEditor:
         self._extra = extra
         hard = extra if omega is not None else np.concatenate([self.handles, extra])
         self._hard = hard
-        free = np.ones(mesh.n_vertices, dtype=bool)
-        free[hard] = False
-        self._free = np.flatnonzero(free)
         if omega is not None:
             Q = Q + sp.coo_matrix((np.full(len(self.handles), omega**2),
                                    (self.handles, self.handles)), shape=Q.shape)
-            Q = Q.tocsr()
-        Qf = Q[self._free]
-        self._Q_fc = Qf[:, hard].tocsr()
-        self._factor = CholeskyFactor(Qf[:, self._free], mesh.name) if len(self._free) else None
+        el = Elimination.from_matrix(Q, hard, mesh.name)
+        self._free = el.free
+        self._Q_fc = el.A_fc
+        self._factor = el.factor
 
     def solve(self, targets) -> np.ndarray:
         """Deformed positions for the given handle targets (h, 3)."""

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import os
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 
 import matplotlib
 
@@ -530,13 +529,13 @@ def save_figure(fig: Figure, path: str | os.PathLike, dpi: int | None = None) ->
     b'\\x89PNG'
     """
     from arapkit.errors import InputError
-    from arapkit.fileio import atomic_open
+    from arapkit.fileio import atomic_open, check_figure_format
 
-    fmt = Path(path).suffix.lower().lstrip(".")
-    supported = fig.canvas.get_supported_filetypes()
-    if fmt not in supported:
+    try:
+        fmt = check_figure_format(path)
+    except InputError:
         plt.close(fig)
-        raise InputError(f"{path}: unsupported figure format '.{fmt}' (use .png, .pdf or .svg)")
+        raise
     try:
         with atomic_open(path, "wb") as f:
             fig.savefig(f, format=fmt, dpi=dpi)

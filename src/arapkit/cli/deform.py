@@ -37,7 +37,6 @@ EXAMPLES = [
     "arapkit deform bar.off --handles bar.sel --transform bar.def --rings-file r.txt -o out.off",
     "arapkit deform bar.off --handles bar.json -o out.ply --report - --quiet | jq .result",
 ]
-_FIGURE_FORMATS = ("png", "pdf", "svg", "jpg", "jpeg")
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -123,7 +122,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="FILE",
         help="JSON report (parameters, timings, energy history); '-' for stdout",
     )
-    p.add_argument("--figure", metavar="FILE", help="summary figure (.png, .pdf or .svg)")
+    p.add_argument("--figure", metavar="FILE", help="summary figure (.png, .pdf, .svg or .jpg)")
     p.add_argument("--force", action="store_true", help="allow overwriting an input file")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar or notes")
     return p
@@ -131,7 +130,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Fail fast, before loading or solving, on any output that cannot be written."""
-    from arapkit.fileio import check_output_path, mesh_format
+    from arapkit.fileio import check_figure_format, check_output_path, mesh_format
 
     inputs = [args.mesh, args.handles, args.transform, args.rings_file]
     check_output_path(args.output, inputs, args.force, "output")
@@ -142,9 +141,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         outs.append(Path(args.report).resolve())
     if args.figure:
         check_output_path(args.figure, inputs, args.force, "figure")
-        ext = Path(args.figure).suffix.lower().lstrip(".")
-        if ext not in _FIGURE_FORMATS:
-            raise InputError(f"{args.figure}: unsupported figure format (use .png, .pdf or .svg)")
+        check_figure_format(args.figure)
         outs.append(Path(args.figure).resolve())
     if len(set(outs)) != len(outs):
         raise InputError(f"{args.output}: output, report and figure must be different files")

@@ -26,7 +26,6 @@ import re
 import sys
 import time
 import warnings
-from pathlib import Path
 
 import numpy as np
 
@@ -230,7 +229,7 @@ def _check_connectivity(frames: Frames, ref: int) -> None:
 
 def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """Fail before any work on an output that cannot be written."""
-    from arapkit.fileio import check_output_path, mesh_format
+    from arapkit.fileio import check_figure_format, check_output_path, mesh_format
 
     if args.output.lower().endswith((".ply", ".ply.gz")):
         raise InputError(f"{args.output}: the rigidity map is text or .npy; "
@@ -242,8 +241,7 @@ def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
             raise InputError(f"{args.ply}: --ply needs a .ply (or .ply.gz) file name")
     if args.figure:
         check_output_path(args.figure, inputs, args.force, "figure")
-        if Path(args.figure).suffix.lower() not in (".png", ".pdf", ".svg", ".jpg", ".jpeg"):
-            raise InputError(f"{args.figure}: unsupported figure format (use .png, .pdf or .svg)")
+        check_figure_format(args.figure)
     if args.energies:
         check_output_path(args.energies, inputs, args.force, "energies")
 
