@@ -337,3 +337,50 @@ def test_cli_energy_option_runs_the_method(bar_case):
     ref = Deformer(m, h, energy="sr-arap", sr_alpha=0.05).solve(t)
     got = load_mesh(d / "sr.off").vertices
     assert np.abs(got - ref.vertices).max() < 1e-6 * m.bounding_box_diagonal
+
+
+# ---------------------------------------------------------------- embedded deformation
+
+
+def test_embedded_meets_handles_descends_and_does_not_fold():
+    from arapkit.quality import folded_edge_fraction
+
+    m = bar()
+    h, t = bar_bend(m, 90)
+    res = Deformer(m, h, energy="embedded").solve(t, tol=1e-8, max_iter=100)
+    diag = m.bounding_box_diagonal
+    assert res.converged and np.isfinite(res.vertices).all()
+    # soft constraints (weight 100, the paper's): met to a small residual, not exactly
+    assert np.linalg.norm(res.vertices[h] - t, axis=1).max() < 5e-3 * diag
+    H = np.array(res.history)
+    assert len(H) >= 2 and np.all(np.diff(H) <= 0)
+    assert folded_edge_fraction(m, res.vertices) == 0.0
+    free = np.setdiff1d(np.arange(m.n_vertices), h)
+    assert np.abs(res.vertices[free] - m.vertices[free]).max() > 0.2 * diag  # it bent
+    assert res.vertex_energy.shape == (m.n_vertices,) and res.vertex_energy.min() >= 0
+
+
+def test_embedded_rigid_motion_is_exact():
+    m = bar(length=3.0, segments=(15, 2, 2))
+    th = 0.8
+    Q = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]])
+    Vr = m.vertices @ Q.T + [1.0, 2.0, 3.0]
+    x = m.vertices[:, 0]
+    h = np.flatnonzero((x < 0.25) | (x > 2.75))
+    res = Deformer(m, h, energy="embedded", nodes=40).solve(Vr[h], tol=1e-12, max_iter=100)
+    assert np.abs(res.vertices - Vr).max() < 1e-9 * m.bounding_box_diagonal
+    assert res.energy < 1e-16
+
+
+def test_embedded_node_option_checked(bar_case):
+    m = bar()
+    with pytest.raises(InputError, match="nodes must be at least 2, got 0"):
+        Deformer(m, [0], energy="embedded", nodes=0)
+    with pytest.raises(InputError, match="nodes is an option of energy 'embedded'"):
+        Deformer(m, [0], nodes=10)
+    d, *_ = bar_case
+    proc = cli("deform", d / "bar.off", "--handles", d / "h.json", "-o", d / "out.ply",
+               "--energy", "embedded", "--nodes", "0")
+    assert proc.returncode == 2
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("arapkit: error: ")]
+    assert len(lines) == 1 and "nodes must be at least 2" in lines[0]
