@@ -384,3 +384,27 @@ def test_embedded_node_option_checked(bar_case):
     assert proc.returncode == 2
     lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("arapkit: error: ")]
     assert len(lines) == 1 and "nodes must be at least 2" in lines[0]
+
+
+@pytest.mark.parametrize("method", ["spokes-and-rims", "sr-arap", "embedded"])
+def test_editor_worker_runs_each_method(method):
+    from arapkit.editor.state import SolverSettings
+    from arapkit.editor.worker import SolveRequest, SolveWorker
+
+    m = bar()
+    h, t = bar_bend(m, 60)
+    updates = []
+    w = SolveWorker(updates.append)
+    w.start()
+    try:
+        settings = SolverSettings(method=method, tol=1e-9, max_iter=5000)
+        w.submit(SolveRequest(m, h, t, np.full(m.n_vertices, 3), settings))
+        assert w.wait_idle(120.0)
+    finally:
+        w.stop()
+    last = updates[-1]
+    assert last.final and last.error is None, last.error
+    # the worker warm-starts from its last shape: compare converged solutions
+    ref = Deformer(m, h, energy=method).solve(t, tol=1e-9, max_iter=5000)
+    assert np.abs(last.vertices - ref.vertices).max() < 1e-4 * m.bounding_box_diagonal
+    assert last.vertex_energy is not None and last.vertex_energy.shape == (m.n_vertices,)
