@@ -18,12 +18,12 @@ import scipy.sparse as sp
 from .constraints import Elimination, anchor_components, check_handles, check_targets
 from .errors import InputError
 from .mesh import Mesh
-from .weights import edge_weights, voronoi_areas
+from .weights import DEFAULT_WEIGHTS, edge_weights, voronoi_areas
 
 __all__ = ["LaplacianEditor", "laplacian_edit", "differential_operator"]
 
 
-def differential_operator(mesh: Mesh, weights: str = "cotan") -> sp.csr_matrix:
+def differential_operator(mesh: Mesh, weights: str = DEFAULT_WEIGHTS) -> sp.csr_matrix:
     """The matrix L with ``L p = delta`` (differential coordinates).
 
     Rows of vertices without neighbours are zero.
@@ -37,7 +37,7 @@ def differential_operator(mesh: Mesh, weights: str = "cotan") -> sp.csr_matrix:
     """
     n = mesh.n_vertices
     E = mesh.edges
-    w = edge_weights(mesh, "uniform" if weights == "uniform" else weights)
+    w = edge_weights(mesh, weights)
     W = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([E[:, 0], E[:, 1]]),
                                                np.concatenate([E[:, 1], E[:, 0]]))),
                       shape=(n, n)).tocsr()
@@ -71,7 +71,7 @@ class LaplacianEditor:
     True
     """
 
-    def __init__(self, mesh: Mesh, handles, weights: str = "cotan",
+    def __init__(self, mesh: Mesh, handles, weights: str = DEFAULT_WEIGHTS,
                  omega: float | None = None) -> None:
         self.mesh = mesh
         self.handles = check_handles(mesh, handles)
@@ -112,7 +112,7 @@ class LaplacianEditor:
         return q
 
 
-def laplacian_edit(mesh: Mesh, handles, targets, weights: str = "cotan",
+def laplacian_edit(mesh: Mesh, handles, targets, weights: str = DEFAULT_WEIGHTS,
                    omega: float | None = None) -> np.ndarray:
     """One-shot Laplacian surface editing; see :class:`LaplacianEditor`.
 
