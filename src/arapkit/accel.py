@@ -5,7 +5,7 @@ last ``m`` iterates: with ``f_t = G(x_t) - x_t`` and the differences ``dF``, ``d
 last ``m`` residuals and images, ``theta = argmin |f_t - dF theta|`` and the accelerated
 iterate is ``G(x_t) - dG theta``. The caller keeps the energy safeguard (accept only when
 the accelerated iterate lowers the energy, else fall back to ``G(x_t)``), see
-:meth:`arapkit.solver.Deformer.solve`.
+:func:`arapkit.loop.local_global`.
 
 The vectors are long (three coordinates per free vertex), so the updates are compiled,
 single-pass kernels; the ``m x m`` normal equations are updated one row per iteration.

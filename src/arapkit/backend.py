@@ -83,21 +83,17 @@ def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w
                 j = up_idx[t]
                 dx, dy, dz = P[j, 0] - px, P[j, 1] - py, P[j, 2] - pz
                 quad += up_w[t] * (dx * dx + dy * dy + dz * dz)
-            if coupled:
-                for t in range(rc_ptr[k], rc_ptr[k + 1]):
-                    j, cw = rc_idx[t], rc_w[t]
-                    s00 += cw * R_prev[j, 0, 0]
-                    s01 += cw * R_prev[j, 1, 0]
-                    s02 += cw * R_prev[j, 2, 0]
-                    s10 += cw * R_prev[j, 0, 1]
-                    s11 += cw * R_prev[j, 1, 1]
-                    s12 += cw * R_prev[j, 2, 1]
-                    s20 += cw * R_prev[j, 0, 2]
-                    s21 += cw * R_prev[j, 1, 2]
-                    s22 += cw * R_prev[j, 2, 2]
             S[k, 0, 0], S[k, 0, 1], S[k, 0, 2] = s00, s01, s02
             S[k, 1, 0], S[k, 1, 1], S[k, 1, 2] = s10, s11, s12
             S[k, 2, 0], S[k, 2, 1], S[k, 2, 2] = s20, s21, s22
+        if coupled:
+            # a separate pass: inside the loop above it slows the uncoupled energies
+            for k in range(k0, k1):
+                for t in range(rc_ptr[k], rc_ptr[k + 1]):
+                    j, cw = rc_idx[t], rc_w[t]
+                    for a in range(3):
+                        for b in range(3):
+                            S[k, a, b] += cw * R_prev[j, b, a]
         fit_rotation_range(S, R, k0, k1)
         off = win_off[c] - win_lo[c]
         for q in range(win_off[c], win_off[c + 1]):

@@ -37,7 +37,7 @@ def differential_operator(mesh: Mesh, weights: str = DEFAULT_WEIGHTS) -> sp.csr_
     """
     n = mesh.n_vertices
     E = mesh.edges
-    w = edge_weights(mesh, "uniform" if weights == "uniform" else weights)
+    w = edge_weights(mesh, weights)
     W = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([E[:, 0], E[:, 1]]),
                                                np.concatenate([E[:, 1], E[:, 0]]))),
                       shape=(n, n)).tocsr()

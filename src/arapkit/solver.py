@@ -65,8 +65,8 @@ def _check_device(device: str) -> str:
     raise InputError(f"unknown device '{device}' (use 'cpu' or 'auto')")
 
 
-def check_method(energy: str, sr_alpha=None) -> dict:
-    """Validate a method name and its options; return the energy's options.
+def check_method(energy: str, sr_alpha=None, nodes=None) -> dict:
+    """Validate a method name and its options; return the method's options.
 
     Examples
     --------
@@ -77,10 +77,16 @@ def check_method(energy: str, sr_alpha=None) -> dict:
         raise InputError(f"unknown energy '{energy}' (use one of {', '.join(ENERGIES)})")
     if sr_alpha is not None and energy != "sr-arap":
         raise InputError(f"sr_alpha is an option of energy 'sr-arap', not '{energy}'")
+    if nodes is not None and energy != "embedded":
+        raise InputError(f"nodes is an option of energy 'embedded', not '{energy}'")
     if energy == "sr-arap":
         from .sr_arap import DEFAULT_ALPHA, check_alpha
 
         return {"alpha": check_alpha(DEFAULT_ALPHA if sr_alpha is None else sr_alpha)}
+    if energy == "embedded":
+        from .embedded import DEFAULT_NODES, check_nodes
+
+        return {"nodes": check_nodes(DEFAULT_NODES if nodes is None else nodes)}
     return {}
 
 
@@ -106,13 +112,15 @@ class Deformer:
         ``energy="rring"``.
     weights : {"cotan", "cotan-clamped", "uniform"}
         Edge weights (see :mod:`arapkit.weights`).
-    energy : {"rring", "spokes-and-rims", "sr-arap"}
+    energy : {"rring", "spokes-and-rims", "sr-arap", "embedded"}
         The method (see ``docs/methods.md``): r-ring ARAP (Chen et al. 2017),
-        spokes-and-rims ARAP (Chao et al. 2010) or smooth-rotation ARAP (Levi & Gotsman
-        2014).
+        spokes-and-rims ARAP (Chao et al. 2010), smooth-rotation ARAP (Levi & Gotsman
+        2014) or embedded deformation (Sumner et al. 2007, :mod:`arapkit.embedded`).
     sr_alpha : float, optional
         SR-ARAP's rotation-smoothness weight (default 0.02, CGAL's), scaled by the surface
         area as CGAL does.
+    nodes : int, optional
+        Embedded deformation's graph size (default 200, at most the vertex count).
     tol : float
         Stop when ``|E_{t-1} - E_t| / |E_{t-1}| < tol`` (the paper's test, gamma = 1e-3).
     max_iter : int
@@ -157,6 +165,7 @@ class Deformer:
         *,
         energy: str = "rring",
         sr_alpha: float | None = None,
+        nodes: int | None = None,
         tol: float = 1e-3,
         max_iter: int = 1000,
         init: str = "identity",
@@ -167,9 +176,7 @@ class Deformer:
         device: str = "cpu",
     ) -> None:
         self.device = _check_device(device)
-        options = check_method(energy, sr_alpha)
-        if energy not in LOCAL_GLOBAL:
-            raise InputError(f"energy '{energy}' is not available in this build")
+        options = check_method(energy, sr_alpha, nodes)
         self.mesh = mesh
         self.energy = energy
         self.weights_kind = weights
@@ -179,14 +186,26 @@ class Deformer:
             raise InputError(f"unknown init '{init}' (use {' or '.join(INITS)})")
         self.init = init
         self.accelerate = bool(accelerate)
-        if self.accelerate and energy == "sr-arap":
-            raise InputError("accelerate: Anderson acceleration needs a descent method; "
-                             "energy 'sr-arap' is not one (use accelerate=False)")
+        if self.accelerate and energy not in ("rring", "spokes-and-rims"):
+            raise InputError(f"accelerate: Anderson acceleration is for the local/global "
+                             f"descent methods; energy '{energy}' is not one "
+                             "(use accelerate=False)")
         if int(history) < 1:
             raise InputError(f"history must be >= 1, got {history}")
         self.history = int(history)
         self.factorisations = 0
         self._laplacian_editor = None
+        self.embedded = None
+        if energy not in LOCAL_GLOBAL:
+            from .embedded import EmbeddedDeformation
+
+            if not np.all(np.asarray(rings) == 1):
+                raise InputError(f"energy '{energy}' has no rigidity map (rings must be 1)")
+            self.embedded = EmbeddedDeformation(mesh, handles, options["nodes"])
+            self.problem = None
+            self._rings = np.ones(mesh.n_vertices, dtype=np.int32)
+            self._weight_notes = []
+            return
         self.problem = ARAPProblem.from_mesh(
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
             reorder=reorder, **options)
@@ -197,12 +216,21 @@ class Deformer:
     # -- configuration (lazy refactorisation, as CGAL) -----------------------------
     def set_handles(self, handles) -> None:
         """Use a new handle set; the factorisation is redone at the next solve."""
+        if self.embedded is not None:
+            from .embedded import EmbeddedDeformation
+
+            self.embedded = EmbeddedDeformation(self.mesh, handles, len(self.embedded.nodes))
+            return
         self.problem = self.problem.with_handles(handles)
         self._laplacian_editor = None
 
     def set_rings(self, rings) -> None:
         """Use a new rigidity map (int or per-vertex); rebuilds neighbourhoods and the factor."""
         p = self.problem
+        if p is None:
+            if not np.all(np.asarray(rings) == 1):
+                raise InputError(f"energy '{self.energy}' has no rigidity map (rings must be 1)")
+            return
         r = check_rings(rings, p.n_vertices)
         t0 = time.perf_counter()
         en = make_energy(self.energy, p.graph, p.w, p.weights_kind, rings=r, perm=p.perm,
@@ -254,17 +282,24 @@ class Deformer:
     @property
     def notes(self) -> list[str]:
         """What the deformer did about the input: fixed components, problematic weights."""
+        if self.problem is None:
+            return []
         return list(self.problem.notes) + self._weight_notes
 
     @property
     def handles(self) -> np.ndarray:
         """Handle vertices."""
-        return self.problem.handles
+        return self.embedded.handles if self.problem is None else self.problem.handles
+
+    def _local_global(self, what: str):
+        if self.problem is None:
+            raise InputError(f"{what}: energy '{self.energy}' is not a local/global method")
+        return self.problem
 
     @property
     def w(self) -> np.ndarray:
         """Edge weights (by edge id of ``mesh.edges``)."""
-        return self.problem.w
+        return self._local_global("edge weights").w
 
     @property
     def rings(self) -> np.ndarray:
@@ -274,7 +309,7 @@ class Deformer:
     @property
     def timings(self) -> dict[str, float]:
         """Precomputation times: neighbourhood_ms, factorisation_ms (once factorised)."""
-        return self.problem.timings
+        return self.embedded.timings if self.problem is None else self.problem.timings
 
     @property
     def neighbourhoods(self) -> Neighbourhoods:
@@ -283,7 +318,7 @@ class Deformer:
         No search is repeated: the solver's structure is permuted (without the transposed
         ``vdisk_*`` copy).
         """
-        p = self.problem
+        p = self._local_global("neighbourhoods")
         nbh = p.energy.nbh
         eptr, eid = _rows(nbh.edge_ptr, p.iperm)
         dptr, did = _rows(nbh.disk_ptr, p.iperm)
@@ -312,6 +347,8 @@ class Deformer:
 
     def prepare(self) -> None:
         """Factorise now (otherwise the first :meth:`solve` does it); reused for all targets."""
+        if self.problem is None:
+            return
         if self.backend.problem is not self.problem or not self.problem.factorised:
             if self.backend.problem.energy is not self.problem.energy:
                 self.backend = CPUBackend(self.problem)
@@ -333,7 +370,7 @@ class Deformer:
         >>> float(d.vertex_energy(m.vertices, R).max())
         0.0
         """
-        p = self.problem
+        p = self._local_global("vertex_energy")
         Pi = np.ascontiguousarray(np.asarray(P, dtype=np.float64)[p.perm])
         Ri = np.ascontiguousarray(np.asarray(R, dtype=np.float64)[p.perm])
         return self.backend.vertex_energy(Pi, Ri)[p.iperm]
@@ -389,9 +426,11 @@ class Deformer:
         tol = self.tol if tol is None else float(tol)
         max_iter = self.max_iter if max_iter is None else int(max_iter)
         accelerate = self.accelerate if accelerate is None else bool(accelerate)
-        if accelerate and self.energy == "sr-arap":
-            raise InputError("accelerate: Anderson acceleration needs a descent method; "
-                             "energy 'sr-arap' is not one")
+        if accelerate and self.energy not in ("rring", "spokes-and-rims"):
+            raise InputError(f"accelerate: Anderson acceleration is for the local/global "
+                             f"descent methods; energy '{self.energy}' is not one")
+        if self.embedded is not None:
+            return self.embedded.solve(T, tol=tol, max_iter=max_iter, callback=callback)
         self.prepare()
         start = self._initial_positions(T, init)
         return local_global(self.problem, self.backend, T, start, tol=tol, max_iter=max_iter,

@@ -30,6 +30,7 @@ __all__ = ["COMMANDS", "build_parser", "main"]
 #: (subcommand, module): each module exposes ``add_parser(subparsers)`` and ``run(args)``.
 COMMANDS: list[tuple[str, str]] = [
     ("deform", "arapkit.cli.deform"),
+    ("compare", "arapkit.cli.compare"),
     ("demo", "arapkit.cli.demo"),
     ("info", "arapkit.cli.info"),
     ("learn", "arapkit.cli.learn"),

@@ -86,6 +86,23 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help=f"edge weights: {', '.join(kinds)} (default {DEFAULT_WEIGHTS})",
     )
     p.add_argument(
+        "--energy",
+        default="rring",
+        metavar="NAME",
+        help="method: rring (r-ring ARAP, default), spokes-and-rims, sr-arap, embedded "
+        "(see docs/methods.md)",
+    )
+    p.add_argument(
+        "--nodes",
+        metavar="N",
+        help="embedded deformation: deformation-graph nodes (default 200)",
+    )
+    p.add_argument(
+        "--sr-alpha",
+        metavar="A",
+        help="SR-ARAP rotation-smoothness weight, times the surface area (default 0.02)",
+    )
+    p.add_argument(
         "--tol",
         type=positive_float,
         default=1e-3,
@@ -126,6 +143,20 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--force", action="store_true", help="allow overwriting an input file")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar or notes")
     return p
+
+
+def _check_method(args: argparse.Namespace) -> dict[str, Any]:
+    """Fail fast on a bad method or option; the keyword arguments for the Deformer."""
+    from arapkit.solver import check_method
+
+    options = check_method(args.energy, args.sr_alpha, args.nodes)
+    if args.energy != "rring" and (args.rings_file or args.rings != 1):
+        raise InputError(f"--energy {args.energy}: has no rigidity map (drop --rings/--rings-file)")
+    if args.energy not in ("rring", "spokes-and-rims") and args.accelerate:
+        raise InputError(f"--accelerate: not available with --energy {args.energy} "
+                         "(only for the local/global descent methods)")
+    args._method_options = options
+    return {"energy": args.energy, "sr_alpha": args.sr_alpha, "nodes": args.nodes}
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -174,6 +205,7 @@ def _report(args, mesh, hs, rings, res, wall_s: float,
             "transform": args.transform,
             "rings_file": args.rings_file,
         },
+        "method": {"energy": args.energy, **_method_options(args)},
         "parameters": {
             "rings": int(args.rings) if not args.rings_file else rings_summary(r),
             "weights": args.weights,
@@ -214,6 +246,7 @@ def run(args: argparse.Namespace) -> int:
     from arapkit.handles import load_handles
 
     t0 = time.perf_counter()
+    method = _check_method(args)
     _check_outputs(args)
     mesh = load_mesh_checked(args.mesh)
     for msg in mesh.notes:
@@ -229,6 +262,7 @@ def run(args: argparse.Namespace) -> int:
         max_iter=args.max_iter,
         init=args.init,
         accelerate=args.accelerate,
+        **method,
     )
     for msg in deformer.notes:
         note(f"{args.mesh}: {worded_for(msg, 'cli')}", args.quiet)
@@ -265,7 +299,7 @@ def run(args: argparse.Namespace) -> int:
             targets=hs.targets,
             fixed_mask=hs.fixed_mask,
             rings=r_full,
-            title=f"{Path(args.mesh).name}: r = {_describe_rings(r_full)}, "
+            title=f"{Path(args.mesh).name}: {_describe_method(args, r_full)}, "
             f"{res.iterations} iterations",
         )
         save_figure(fig, args.figure)
@@ -281,6 +315,23 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def _method_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The method's options as used (defaults filled in), named as in the CLI."""
+    opts = getattr(args, "_method_options", {})
+    return {("sr_alpha" if k == "alpha" else k): v for k, v in opts.items()}
+
+
+def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
+    if args.energy == "rring":
+        return f"r = {_describe_rings(r)}"
+    opts = _method_options(args)
+    if args.energy == "sr-arap":
+        return f"SR-ARAP, alpha = {opts['sr_alpha']:g}"
+    if args.energy == "embedded":
+        return f"embedded deformation, {opts['nodes']} nodes"
+    return args.energy
+
+
 def _describe_rings(r: np.ndarray) -> str:
     lo, hi = int(r.min()), int(r.max())
     return str(lo) if lo == hi else f"{lo}..{hi}"
@@ -292,6 +343,7 @@ def _print_summary(args, mesh, hs, res, wall: float) -> None:
         f"vertices: {mesh.n_vertices}",
         f"faces: {mesh.n_faces}",
         f"handles: {len(hs.indices)} in {len(hs.groups)} group(s)",
+        f"method: {args.energy}",
         f"iterations: {res.iterations}",
         f"converged: {'yes' if res.converged else 'no'}",
         f"energy: {res.energy:.6g}",

@@ -3,6 +3,8 @@
 * Fig. 3 / Table 1: the bar bent by 180 degrees with r = 1, 2, 4, 6, 10, with timings.
 * Fig. 4 / Fig. 5: energy per iteration and iterations against r.
 * Fig. 8: a two-material bar, soft middle third r = 2, the rest r = 6.
+* Figs. 9-12 style: ARAP, SR-ARAP, embedded deformation, r = 4 and the two-material map
+  side by side on the same bend (``compare.png``, ``compare.csv``).
 
 Examples
 --------
@@ -187,6 +189,8 @@ def run(args: argparse.Namespace) -> int:
     )
 
     figures = _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed, plots)
+    comparison = _comparison(out, mesh, handles, targets, soft_hard, plots)
+    figures.append("compare.png")
     report = {
         "mesh": {"name": "bar", "vertices": mesh.n_vertices, "faces": mesh.n_faces},
         "degrees": args.degrees,
@@ -200,6 +204,7 @@ def run(args: argparse.Namespace) -> int:
             "soft_vertices": int((soft_hard == 2).sum()),
             "energy_history": mixed.history,
         },
+        "comparison": comparison,
         "figures": figures,
         "wall_s": time.perf_counter() - t_start,
     }
@@ -210,10 +215,29 @@ def run(args: argparse.Namespace) -> int:
         f"{len(handles)} handles, tol 1e-3 (times after a JIT warm-up)"
     )
     print(format_table(rows))
+    from arapkit.compare import format_rows
+
+    print("\nMethods on the same bend (own energies are not comparable across methods):")
+    print(format_rows(comparison))
     print(
-        f"wrote {len(figures)} figures, {len(rings_list) + 2} meshes and demo-report.json to {out}"
+        f"wrote {len(figures)} figures, {len(rings_list) + 2} meshes, compare.csv and "
+        f"demo-report.json to {out}"
     )
     return 0
+
+
+def _comparison(out: Path, mesh, handles, targets, soft_hard, plots) -> list[dict[str, Any]]:
+    """ARAP, SR-ARAP, embedded deformation, r = 4 and the two-material map on one bend."""
+    from arapkit.compare import comparison_figure, comparison_rows, run_comparison, write_csv
+
+    runs = run_comparison(mesh, handles, targets, rings=4, rings_map=soft_hard)
+    rows = comparison_rows(runs)
+    write_csv(out / "compare.csv", rows)
+    fixed = np.all(targets == mesh.vertices[handles], axis=1)
+    fig = comparison_figure(mesh, runs, handles, targets, fixed,
+                            title="bar bent 180 degrees: methods side by side")
+    plots.save_figure(fig, out / "compare.png")
+    return rows
 
 
 def _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed, plots) -> list:

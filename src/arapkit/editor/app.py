@@ -53,7 +53,9 @@ from arapkit.errors import InputError
 
 TOOLS = ("Navigate", "Select: click", "Select: rectangle", "Paint brush", "Flood fill")
 VIEWS = ("Shaded", "Rigidity r", "Energy")
-METHODS = {"r-ring ARAP": "arap", "Laplacian editing": "laplacian"}
+METHODS = {"r-ring ARAP": "arap", "Laplacian editing": "laplacian",
+           "spokes-and-rims ARAP": "spokes-and-rims", "SR-ARAP": "sr-arap",
+           "embedded deformation": "embedded"}
 UP_AXES = {"+z": (0, 0, 1), "+y": (0, 1, 0), "+x": (1, 0, 0)}
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 MAX_R = 10

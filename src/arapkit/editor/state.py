@@ -46,7 +46,9 @@ from arapkit.weights import DEFAULT_WEIGHTS
 
 SESSION_FORMAT = "arapkit-editor-session"
 SESSION_VERSION = 1
-METHODS = ("arap", "laplacian")
+#: solver-panel methods: "arap" is r-ring ARAP with the painted map, the others name
+#: :data:`arapkit.energy.ENERGIES` (no rigidity map) or Laplacian editing
+METHODS = ("arap", "laplacian", "spokes-and-rims", "sr-arap", "embedded")
 MAX_UNDO = 200
 
 

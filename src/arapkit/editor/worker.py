@@ -101,16 +101,20 @@ class _Engine:
         from arapkit import Deformer
 
         s = req.settings
-        if self.deformer is None or self._key != (id(req.mesh), s.weights):
+        energy = "rring" if s.method == "arap" else s.method
+        # only r-ring ARAP has a rigidity map; the other methods ignore the painted one
+        rings = req.rings if energy == "rring" else 1
+        key = (id(req.mesh), s.weights, energy)
+        if self.deformer is None or self._key != key:
             self.deformer = Deformer(
-                req.mesh, req.handles, rings=req.rings, weights=s.weights,
+                req.mesh, req.handles, rings=rings, energy=energy, weights=s.weights,
                 tol=s.tol, max_iter=s.max_iter,
             )
-            self._key = (id(req.mesh), s.weights)
+            self._key = key
             self.mesh = req.mesh
             return self.deformer
         d = self.deformer
-        if not np.array_equal(d.rings, req.rings):
+        if energy == "rring" and not np.array_equal(d.rings, req.rings):
             d.set_rings(req.rings)
         if not np.array_equal(d.handles, req.handles):
             d.set_handles(req.handles)

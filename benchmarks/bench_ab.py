@@ -1,0 +1,80 @@
+"""Per-iteration time of two arapkit source trees, interleaved (A/B on a shared machine).
+
+Each round runs a fresh process per tree (so each compiles and caches its own kernels) that
+solves the bunny drag of ``bench_arap.py`` at r = 1 and r = 3 for 20 iterations, several
+times, and reports its fastest repeat. Rounds alternate A, B, A, B ... so that load from
+other processes hits both alike; the summary is the minimum over rounds.
+
+Usage::
+
+    git worktree add /tmp/base <commit>        # or: git archive <commit> src | tar -x -C /tmp/base
+    python benchmarks/bench_ab.py /tmp/base/src src --rounds 6
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
+
+
+def child(repeats: int) -> None:
+    """Runs inside one tree: the fastest of ``repeats`` 20-iteration solves per r, in ms/it."""
+    sys.path.insert(0, str(HERE))
+    from bench_arap import DATA, drag_problem
+
+    import arapkit
+    from arapkit import Deformer, load_mesh
+
+    m = load_mesh(DATA / "bunny00.off")
+    h, T = drag_problem(m)
+    out = {"src": str(Path(arapkit.__file__).parent)}
+    for r in (1, 3):
+        d = Deformer(m, h, rings=r)
+        d.solve(T, max_iter=2, tol=0)  # factorise and compile outside the timing
+        best = float("inf")
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            d.solve(T, max_iter=20, tol=0)
+            best = min(best, (time.perf_counter() - t0) / 20)
+        out[f"r{r}"] = 1e3 * best
+    print(json.dumps(out))
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("a", nargs="?", help="source folder A (holds the arapkit package)")
+    ap.add_argument("b", nargs="?", help="source folder B")
+    ap.add_argument("--rounds", type=int, default=6)
+    ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    a = ap.parse_args(argv)
+    if a.child:
+        child(a.repeats)
+        return
+    runs: dict[str, list[dict]] = {a.a: [], a.b: []}
+    for i in range(a.rounds):
+        for src in (a.a, a.b) if i % 2 == 0 else (a.b, a.a):
+            proc = subprocess.run([sys.executable, __file__, "--child", "--repeats",
+                                   str(a.repeats)], capture_output=True, text=True, check=True,
+                                  env={**os.environ, "PYTHONPATH": str(Path(src).resolve())})
+            runs[src].append(json.loads(proc.stdout.strip().splitlines()[-1]))
+            print(src, runs[src][-1], flush=True)
+    print("\n| tree | r = 1 ms/it (min) | r = 3 ms/it (min) | rounds |")
+    print("|---|---|---|---|")
+    for src, rs in runs.items():
+        print(f"| {src} | {min(r['r1'] for r in rs):.2f} | {min(r['r3'] for r in rs):.2f} "
+              f"| {len(rs)} |")
+    b1 = min(r["r1"] for r in runs[a.b]) / min(r["r1"] for r in runs[a.a])
+    b3 = min(r["r3"] for r in runs[a.b]) / min(r["r3"] for r in runs[a.a])
+    print(f"\nB / A: r = 1 {b1:.3f}, r = 3 {b3:.3f}")
+
+
+if __name__ == "__main__":
+    main()
