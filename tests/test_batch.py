@@ -276,6 +276,26 @@ def test_library_run_returns_summary_rows(data, cluster, monkeypatch):
     assert report["command"][:3] == ["arapkit", "deform", str(folder / "bar.off")]
 
 
+def test_job_hash_follows_parameters_and_input_files(tmp_path):
+    from arapkit.batch import job_hash, normalise_job
+
+    m = bar(segments=(7, 1, 1))
+    save_mesh(tmp_path / "m.off", m.vertices, m.faces)
+    save_sel(tmp_path / "m.sel", m.n_vertices, [0], [m.n_vertices - 1])
+    save_def(tmp_path / "m.def", np.eye(4))
+    job = normalise_job({"mesh": "m.off", "handles": "m.sel", "output": "o.ply"}, tmp_path)
+    assert job["mesh"] == str(tmp_path / "m.off") and job["weights"]
+    h0 = job_hash(job)
+    assert job_hash(dict(job)) == h0
+    assert job_hash({**job, "tol": 1e-4}) != h0
+    assert job_hash({**job, "output": "p.ply"}) != h0
+    # the .def read beside the .sel counts as an input although the job does not name it
+    lift = np.eye(4)
+    lift[1, 3] = 0.5
+    save_def(tmp_path / "m.def", lift)
+    assert job_hash(job) != h0
+
+
 # --------------------------------------------------------------------------- augmentation
 
 

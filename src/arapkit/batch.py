@@ -154,7 +154,7 @@ rings, rings_file, weights, energy, tol, max_iter, init, accelerate, output)
     base = Path(base)
     job = {**_DEFAULTS, **obj}
     job["mesh"] = _path(job["mesh"], "mesh", base, where)
-    if isinstance(job["handles"], list):
+    if isinstance(job["handles"], (list, dict)):
         pass  # inline handle groups, checked against the mesh by the task
     else:
         job["handles"] = _path(job["handles"], "handles", base, where)
@@ -307,6 +307,7 @@ def _worker_address() -> str:
 
 def _deform_command(job: dict, output: str) -> list[str]:
     """The ``arapkit deform`` command line equivalent to ``job``."""
+    # inline handles: the report's input.handles, saved as a .json file
     handles = job["handles"] if isinstance(job["handles"], str) else "HANDLES.json"
     cmd = ["arapkit", "deform", job["mesh"], "--handles", handles]
     if job["transform"]:

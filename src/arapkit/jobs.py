@@ -52,7 +52,7 @@ class DeformJob:
     ----------
     mesh : str
         Input mesh file.
-    handles : str or list
+    handles : str, list or dict
         Handle file (``.json`` groups or ``.sel``), or the handle groups themselves (the
         JSON schema of the README, already parsed).
     transform : str or None
@@ -68,7 +68,7 @@ class DeformJob:
     """
 
     mesh: str
-    handles: str | list
+    handles: str | list | dict
     transform: str | None = None
     rings: int = 1
     rings_file: str | None = None
@@ -84,6 +84,9 @@ class DeformJob:
         files = [self.mesh, self.transform, self.rings_file]
         if isinstance(self.handles, (str, os.PathLike)):
             files.append(self.handles)
+            if self.transform is None and os.fspath(self.handles).lower().endswith(".sel"):
+                # the .def beside the .sel is read when no transform is named
+                files.append(os.path.splitext(os.fspath(self.handles))[0] + ".def")
         return [os.fspath(f) for f in files if f is not None]
 
 
