@@ -422,6 +422,24 @@ def _start(args: list[str], log: Path) -> subprocess.Popen:
 
 
 @needs_dask
+def test_default_local_cluster_of_processes(data):
+    """Without --scheduler the command starts (and stops) its own cluster of processes."""
+    folder, _, jobs = data
+    out = folder / "out"
+    proc = subprocess.run(
+        [sys.executable, "-m", "arapkit.cli", "batch", str(folder / "jobs.jsonl"), "-o",
+         str(out), "--workers", "2"],
+        capture_output=True, text=True, timeout=300,
+        env={**os.environ, "PYTHONPATH": str(ROOT / "src")})
+    assert proc.returncode == 0, proc.stderr
+    rows = summary(out)
+    assert [r["status"] for r in rows] == ["ok"] * 4
+    used = {r["worker"] for r in rows}
+    assert 1 <= len(used) <= 2 and all(w.startswith("tcp://127.0.0.1:") for w in used)
+    assert proc.stdout.splitlines()[0] == "jobs: 4 (ok 4, skipped 0, failed 0)"
+
+
+@needs_dask
 def test_scheduler_and_two_worker_processes(data):
     """A scheduler and two workers on 127.0.0.1, then ``arapkit batch --scheduler``."""
     from distributed import Client
