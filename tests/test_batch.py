@@ -21,6 +21,7 @@ from pathlib import Path
 import numba
 import numpy as np
 import pytest
+from conftest import data_path
 
 from arapkit.cli import main
 from arapkit.fileio import read_ply_vertex_properties, save_mesh
@@ -379,6 +380,26 @@ def test_learn_sequences_on_dask_equal_one_process(cluster):
     tables = [ring_energies(mesh, s, 1, 4)[0] for s in seqs]
     brute = sum(len(s) * t for s, t in zip(seqs, tables)) / 5
     np.testing.assert_allclose(dist.energies, brute, rtol=1e-12)
+
+
+@needs_dask
+def test_learn_panda_walk_split_in_sequences(cluster):
+    """The real 61-frame walk as three sequences on the cluster: the one-process map."""
+    from arapkit import Mesh
+    from arapkit.batch import dask_map
+    from arapkit.learn import learn_rings, learn_rings_sequences
+
+    with np.load(data_path("sequences", "panda_walk_seq.npz")) as d:
+        V, F = d["V"].astype(np.float64), d["F"]
+    ref = Mesh(V[0], F)
+    seqs = [V[1:21], V[21:41], V[41:]]
+    dist = learn_rings_sequences(ref, seqs, omega="auto", map=dask_map(cluster))
+    one = learn_rings(ref, V[1:], omega="auto")
+    assert dist.n_examples == one.n_examples == 60
+    np.testing.assert_allclose(dist.energies, one.energies, rtol=1e-11, atol=1e-15)
+    assert dist.omega == pytest.approx(one.omega, rel=1e-12)
+    np.testing.assert_array_equal(dist.rings, one.rings)
+    assert len(np.unique(one.rings)) >= 4  # the walk's map spreads over r (README: 1..6)
 
 
 @needs_dask

@@ -45,6 +45,7 @@ import sys
 import time
 import zlib
 from collections.abc import Callable, Iterable, Sequence
+from functools import partial
 from pathlib import Path
 from typing import Any
 
@@ -383,8 +384,7 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
     t0 = time.perf_counter()
     worker = _worker_address()
     if isinstance(threads, dict):
-        host = _host(worker)
-        threads = max(1, (os.cpu_count() or 1) // max(1, threads.get(host, 1)))
+        threads = _threads_for(threads)
     output = Path(outdir) / job["output"]
     try:
         digest = job_hash(job)
@@ -583,10 +583,21 @@ def run(
     return _as_table(done)
 
 
+def _threads_for(slots: dict[str, int]) -> int:
+    """Numba threads for a task on this worker: the host's cores over its worker threads."""
+    return max(1, (os.cpu_count() or 1) // max(1, slots.get(_host(_worker_address()), 1)))
+
+
+def _limited_call(func: Callable, slots: dict[str, int], item: Any) -> Any:
+    _limit_threads(_threads_for(slots))
+    return func(item)
+
+
 def dask_map(client) -> Callable:
     """``map(func, items)`` running one task per item on ``client``'s cluster, in order.
 
-    For :func:`arapkit.learn.learn_rings_sequences` (one energy table per sequence).
+    For :func:`arapkit.learn.learn_rings_sequences` (one energy table per sequence). Each
+    task limits numba to the host's cores over its worker threads, as batch jobs do.
 
     Examples
     --------
@@ -597,7 +608,8 @@ def dask_map(client) -> Callable:
     """
 
     def _map(func: Callable, items: Iterable) -> list:
-        return client.gather(client.map(func, list(items), pure=False))
+        task = partial(_limited_call, func, _host_slots(client))
+        return client.gather(client.map(task, list(items), pure=False))
 
     return _map
 
