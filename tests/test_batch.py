@@ -132,7 +132,7 @@ def test_outputs_equal_single_deform_runs(data, cluster, capsys):
             report = json.loads((out / (job["output"] + ".json")).read_text())
             threads = report["batch"]["numba_threads"]
             # two one-thread workers on this host share its cores
-            assert threads == max(1, (os.cpu_count() or 1) // 2)
+            assert threads == max(1, len(os.sched_getaffinity(0)) // 2)
             assert report["result"]["iterations"] == int(row["iterations"])
             assert report["result"]["energy"] == float(row["energy"])
             numba.set_num_threads(threads)

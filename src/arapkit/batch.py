@@ -490,7 +490,7 @@ def _local_cluster(workers: int | None):
 
     from distributed import Client, LocalCluster
 
-    n = max(1, int(workers or os.cpu_count() or 1))
+    n = max(1, int(workers or _cores()))
     cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True,
                            dashboard_address=None, silence_logs=logging.ERROR)
     return cluster, Client(cluster)
@@ -583,9 +583,17 @@ def run(
     return _as_table(done)
 
 
+def _cores() -> int:
+    """Cores this process may use (its CPU affinity where the platform has one)."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # macOS, Windows
+        return os.cpu_count() or 1
+
+
 def _threads_for(slots: dict[str, int]) -> int:
     """Numba threads for a task on this worker: the host's cores over its worker threads."""
-    return max(1, (os.cpu_count() or 1) // max(1, slots.get(_host(_worker_address()), 1)))
+    return max(1, _cores() // max(1, slots.get(_host(_worker_address()), 1)))
 
 
 def _limited_call(func: Callable, slots: dict[str, int], item: Any) -> Any:
