@@ -314,7 +314,7 @@ def test_cli_npz_and_identical_frame_warning(tmp_path, limb, capsys):
         ("reference", "--reference 7 is out of range: there are 2 frames"),
         ("glob", "no files match"),
         ("npz keys", "expected arrays 'V'"),
-        ("npz and mesh", "give it alone"),
+        ("npz and mesh", "give .npz files alone"),
         ("ply output", "use --ply"),
     ],
 )

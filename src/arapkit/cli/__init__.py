@@ -35,6 +35,7 @@ COMMANDS: list[tuple[str, str]] = [
     ("info", "arapkit.cli.info"),
     ("learn", "arapkit.cli.learn"),
     ("edit", "arapkit.cli.edit"),
+    ("batch", "arapkit.cli.batch"),
 ]
 
 _EPILOG = """examples:

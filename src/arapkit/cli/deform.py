@@ -20,11 +20,9 @@ import numpy as np
 from arapkit.cli.common import (
     Progress,
     add_example_epilog,
-    load_mesh_checked,
     note,
     positive_float,
     positive_int,
-    rings_summary,
 )
 from arapkit.errors import InputError, worded_for
 from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
@@ -178,85 +176,16 @@ def _check_outputs(args: argparse.Namespace) -> None:
         raise InputError(f"{args.output}: output, report and figure must be different files")
 
 
-def _rings(args: argparse.Namespace, n_vertices: int) -> np.ndarray | int:
-    if args.rings_file:
-        from arapkit.handles import load_rings
+def _job(args: argparse.Namespace, method: dict[str, Any]):
+    """The library's job description of these arguments."""
+    from arapkit.jobs import DeformJob
 
-        return load_rings(args.rings_file, n_vertices)
-    return int(args.rings)
-
-
-def _report(args, mesh, hs, rings, res, wall_s: float,
-            sum_of_squares: bool = True) -> dict[str, Any]:
-    from arapkit.cli import _version
-
-    r = np.broadcast_to(np.asarray(rings), (mesh.n_vertices,))
-    return {
-        "arapkit_version": _version(),
-        "command": ["arapkit", *getattr(args, "_argv", sys.argv[1:])],
-        "input": {
-            "mesh": args.mesh,
-            "n_vertices": mesh.n_vertices,
-            "n_faces": mesh.n_faces,
-            "n_components": mesh.n_components,
-            "n_boundary_loops": len(mesh.boundary_loops),
-            "notes": list(mesh.notes),
-            "handles": args.handles,
-            "transform": args.transform,
-            "rings_file": args.rings_file,
-        },
-        "method": {"energy": args.energy, **_method_options(args)},
-        "parameters": {
-            "rings": int(args.rings) if not args.rings_file else rings_summary(r),
-            "weights": args.weights,
-            "tol": args.tol,
-            "max_iter": args.max_iter,
-            "init": args.init,
-            "accelerate": args.accelerate,
-        },
-        "handles": {
-            "count": len(hs.indices),
-            "groups": [
-                {"name": g.name, "count": len(g.indices), "kind": g.kind} for g in hs.groups
-            ],
-        },
-        "result": {
-            "iterations": res.iterations,
-            "converged": res.converged,
-            "energy": res.energy,
-            # False only for raw cotangent weights with negative values (obtuse triangles)
-            "energy_is_sum_of_squares": sum_of_squares,
-            **({} if sum_of_squares else {"energy_note": (
-                "raw cotangent weights have negative values on this mesh: the energy is not "
-                "a sum of squares and can be negative")}),
-            "energy_history": list(res.history),
-            "max_handle_error": float(
-                np.max(np.linalg.norm(res.vertices[hs.indices] - hs.targets, axis=1))
-            ),
-        },
-        "timings": {**res.timings, "wall_s": wall_s},
-        "outputs": {"mesh": args.output, "report": args.report, "figure": args.figure},
-    }
-
-
-def run(args: argparse.Namespace) -> int:
-    """Execute ``arapkit deform``; returns the exit status."""
-    from arapkit import Deformer
-    from arapkit.fileio import save_mesh, write_json
-    from arapkit.handles import load_handles
-
-    t0 = time.perf_counter()
-    method = _check_method(args)
-    _check_outputs(args)
-    mesh = load_mesh_checked(args.mesh)
-    for msg in mesh.notes:
-        note(f"{args.mesh}: {msg}", args.quiet)
-    hs = load_handles(args.handles, mesh.vertices, args.transform)
-    rings = _rings(args, mesh.n_vertices)
-    deformer = Deformer(
-        mesh,
-        hs.indices,
-        rings=rings,
+    return DeformJob(
+        mesh=args.mesh,
+        handles=args.handles,
+        transform=args.transform,
+        rings=args.rings,
+        rings_file=args.rings_file,
         weights=args.weights,
         tol=args.tol,
         max_iter=args.max_iter,
@@ -264,10 +193,21 @@ def run(args: argparse.Namespace) -> int:
         accelerate=args.accelerate,
         **method,
     )
-    for msg in deformer.notes:
-        note(f"{args.mesh}: {worded_for(msg, 'cli')}", args.quiet)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Execute ``arapkit deform``; returns the exit status."""
+    from arapkit.fileio import write_json
+    from arapkit.jobs import job_report, prepare_job, save_result
+
+    t0 = time.perf_counter()
+    method = _check_method(args)
+    _check_outputs(args)
+    job = _job(args, method)
+    prepared = prepare_job(job, note=lambda msg: note(worded_for(msg, "cli"), args.quiet))
+    mesh, hs = prepared.mesh, prepared.handles
     with Progress(disable=args.quiet) as progress:
-        res = deformer.solve(hs.targets, callback=progress)
+        res = prepared.solve(callback=progress)
     if not res.converged:
         note(
             f"{args.mesh}: stopped after {res.iterations} iterations without converging "
@@ -276,14 +216,16 @@ def run(args: argparse.Namespace) -> int:
         )
     wall = time.perf_counter() - t0
 
-    r_full = np.broadcast_to(np.asarray(deformer.rings), (mesh.n_vertices,))
-    save_mesh(
-        args.output,
-        res.vertices,
-        mesh.faces,
-        {"energy": res.vertex_energy, "rings": r_full.astype(np.int32)},
+    r_full = prepared.rings
+    save_result(args.output, prepared, res)
+    report = job_report(
+        job,
+        prepared,
+        res,
+        wall,
+        command=["arapkit", *getattr(args, "_argv", sys.argv[1:])],
+        outputs={"mesh": args.output, "report": args.report, "figure": args.figure},
     )
-    report = _report(args, mesh, hs, r_full, res, wall, deformer.energy_is_sum_of_squares)
     if args.report and args.report != "-":
         write_json(args.report, report)
     if args.figure:

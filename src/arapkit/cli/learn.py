@@ -1,7 +1,9 @@
 """``arapkit learn``: learn a per-vertex rigidity map from a set of deforming shapes.
 
 The shapes share one connectivity: several mesh files (listed, as a glob, or a folder) or
-one ``.npz`` holding ``V`` (frames x vertices x 3) and ``F``. The result is one ring size
+``.npz`` files holding ``V`` (frames x vertices x 3) and ``F``. Each ``.npz``, folder or glob
+is a sequence; with several, each sequence's energy table is computed on its own (as a Dask
+task with ``--scheduler``) and the tables are averaged by example count. The result is one ring size
 per vertex of the reference, written as text (one r per line) for
 ``arapkit deform --rings-file``.
 
@@ -39,6 +41,7 @@ EXAMPLES = [
     "arapkit learn walk.npz -o rings.txt --figure rings.png",
     "arapkit learn 'poses/*.obj' -o rings.txt --ply rings.ply",
     "arapkit learn poses/ -o rings.txt --reference 2 --omega 0.3",
+    "arapkit learn walk.npz run.npz jump.npz -o rings.txt --scheduler tcp://10.0.0.5:8786",
     "arapkit deform rest.obj --handles h.json --rings-file rings.txt -o out.ply",
 ]
 _MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
@@ -78,8 +81,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "frames",
         nargs="+",
         metavar="FRAMES",
-        help="mesh files (OFF, OBJ, PLY, STL), globs, folders of meshes, or one .npz with "
-        "V (frames x vertices x 3) and F",
+        help="mesh files (OFF, OBJ, PLY, STL), globs, folders of meshes, or .npz files with "
+        "V (frames x vertices x 3) and F; each .npz, folder or glob is one sequence",
     )
     p.add_argument("-o", "--output", required=True, metavar="OUT",
                    help="rigidity map: text, one r per line (or .npy)")
@@ -100,6 +103,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--ply", metavar="FILE", help="the reference as PLY with a 'rings' property")
     p.add_argument("--energies", metavar="FILE",
                    help="table E_ARAP(k, r), one row per vertex (.npy, or text otherwise)")
+    p.add_argument("--scheduler", metavar="ADDRESS",
+                   help="compute each sequence's energy table as a task on this Dask cluster "
+                   "(tcp://HOST:PORT; needs pip install 'arapkit[batch]')")
     p.add_argument("--force", action="store_true", help="allow overwriting an input file")
     p.add_argument("--quiet", "-q", action="store_true", help="no notes on stderr")
     return p
@@ -117,10 +123,13 @@ class Frames:
     faces : (m, 3) int64, or None for mesh files (each file has its own, checked later)
     names : list of str
     meshes : list of Mesh or None (mesh files only)
+    sequences : list of list of int
+        Frame indices of each sequence (each .npz, folder or glob; listed files together).
     """
 
-    def __init__(self, vertices, faces, names, meshes=None) -> None:
+    def __init__(self, vertices, faces, names, meshes=None, sequences=None) -> None:
         self.vertices, self.faces, self.names, self.meshes = vertices, faces, names, meshes
+        self.sequences = sequences if sequences is not None else [list(range(len(names)))]
 
     def __len__(self) -> int:
         return len(self.names)
@@ -185,8 +194,46 @@ def _load_npz(path: str) -> Frames:
     return Frames([v.astype(np.float64) for v in V], F, names)
 
 
+def _sequence_paths(items: list[str]) -> list[list[str]]:
+    """Files per sequence: each .npz, folder or glob is one; consecutive listed files one."""
+    groups: list[list[str]] = []
+    loose = False  # the last group holds individually listed mesh files
+    for item in items:
+        paths = expand_frames([item])
+        single = len(paths) == 1 and paths[0] == item and not item.lower().endswith(".npz")
+        if single and loose:
+            groups[-1] += paths
+            continue
+        for p in paths:
+            if p.lower().endswith(".npz"):
+                groups.append([p])
+        meshes = [p for p in paths if not p.lower().endswith(".npz")]
+        if meshes:
+            groups.append(meshes)
+        loose = single
+    return groups
+
+
+def _load_npz_sequences(paths: list[str]) -> Frames:
+    parts = [_load_npz(p) for p in paths]
+    F = parts[0].faces
+    for p, part in zip(paths[1:], parts[1:], strict=True):
+        if part.faces.shape != F.shape or not np.array_equal(part.faces, F):
+            raise InputError(f"{p}: faces differ from {paths[0]}: all sequences must share "
+                             "one connectivity")
+    seqs, start = [], 0
+    for part in parts:
+        seqs.append(list(range(start, start + len(part))))
+        start += len(part)
+    return Frames([v for part in parts for v in part.vertices], F,
+                  [name for part in parts for name in part.names], sequences=seqs)
+
+
 def load_frames(items: list[str]) -> Frames:
     """Read the frames named on the command line (see :func:`expand_frames`).
+
+    Each ``.npz``, folder or glob is one sequence, and so are mesh files listed one after
+    the other; ``Frames.sequences`` records them.
 
     Examples
     --------
@@ -195,15 +242,20 @@ def load_frames(items: list[str]) -> Frames:
     ...
     arapkit.errors.InputError: /no/such.npz: file not found
     """
-    paths = expand_frames(items)
+    groups = _sequence_paths(items)
+    paths = [p for g in groups for p in g]
     npz = [p for p in paths if p.lower().endswith(".npz")]
     if npz:
-        if len(paths) > 1:
-            raise InputError(f"{npz[0]}: a .npz holds all frames; give it alone, not with "
-                             f"{len(paths) - 1} other file(s)")
-        return _load_npz(npz[0])
+        if len(npz) != len(paths):
+            raise InputError(f"{npz[0]}: a .npz holds a whole sequence; give .npz files alone, "
+                             f"not with {len(paths) - len(npz)} mesh file(s)")
+        return _load_npz_sequences(npz)
     meshes = [load_mesh_checked(p) for p in paths]
-    return Frames([m.vertices for m in meshes], None, list(paths), meshes)
+    seqs, start = [], 0
+    for g in groups:
+        seqs.append(list(range(start, start + len(g))))
+        start += len(g)
+    return Frames([m.vertices for m in meshes], None, list(paths), meshes, seqs)
 
 
 def _check_connectivity(frames: Frames, ref: int) -> None:
@@ -250,6 +302,32 @@ def _warn(message: str) -> None:
     print(f"arapkit: warning: {message}", file=sys.stderr)
 
 
+def _learn_sequences(args, frames: Frames, ref: int, reference):
+    """One energy table per sequence (a Dask task each with --scheduler), combined."""
+    from arapkit.learn import learn_rings_sequences
+
+    seqs = [[frames.vertices[i] for i in seq if i != ref] for seq in frames.sequences]
+    if not args.scheduler:
+        return learn_rings_sequences(reference, seqs, args.r_min, args.r_max, args.omega,
+                                     args.weights)
+    from arapkit.batch import dask_map, require_dask
+
+    require_dask()
+    from distributed import Client
+
+    try:
+        client = Client(args.scheduler, timeout=30)
+    except (OSError, TimeoutError, ValueError) as e:
+        raise InputError(f"{args.scheduler}: cannot reach the Dask scheduler "
+                         f"({type(e).__name__}: {e})") from None
+    with client:
+        if not args.quiet:
+            print(f"arapkit: {len(seqs)} sequence(s), energy tables on {args.scheduler}",
+                  file=sys.stderr)
+        return learn_rings_sequences(reference, seqs, args.r_min, args.r_max, args.omega,
+                                     args.weights, map=dask_map(client))
+
+
 def _learn(args, frames: Frames, ref: int):
     from arapkit import Mesh
     from arapkit.learn import learn_rings
@@ -262,8 +340,11 @@ def _learn(args, frames: Frames, ref: int):
     with warnings.catch_warnings():
         # identical frames are reported below by file name instead
         warnings.simplefilter("ignore", UserWarning)
-        res = learn_rings(reference, [frames.vertices[i] for i in others], args.r_min,
-                          args.r_max, args.omega, args.weights)
+        if len(frames.sequences) > 1 or args.scheduler:
+            res = _learn_sequences(args, frames, ref, reference)
+        else:
+            res = learn_rings(reference, [frames.vertices[i] for i in others], args.r_min,
+                              args.r_max, args.omega, args.weights)
     # warnings are shown even with --quiet: they say the result may be meaningless
     for j in res.identical:
         _warn(f"{frames.names[others[j]]} is identical to the reference: it carries no "
