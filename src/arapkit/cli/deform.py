@@ -20,11 +20,14 @@ import numpy as np
 from arapkit.cli.common import (
     Progress,
     add_example_epilog,
+    add_weld_option,
     load_mesh_checked,
+    maybe_weld,
     note,
     positive_float,
     positive_int,
     rings_summary,
+    warn,
 )
 from arapkit.errors import InputError
 from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
@@ -124,6 +127,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="JSON report (parameters, timings, energy history); '-' for stdout",
     )
     p.add_argument("--figure", metavar="FILE", help="summary figure (.png, .pdf or .svg)")
+    add_weld_option(p)
     p.add_argument("--force", action="store_true", help="allow overwriting an input file")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar or notes")
     return p
@@ -150,12 +154,32 @@ def _check_outputs(args: argparse.Namespace) -> None:
         raise InputError(f"{args.output}: output, report and figure must be different files")
 
 
-def _rings(args: argparse.Namespace, n_vertices: int) -> np.ndarray | int:
+def _rings(args: argparse.Namespace, mesh) -> np.ndarray | int:
+    """r per vertex of the solved mesh; a map given on a welded mesh's input takes, for
+    each merged vertex, the largest r of its copies."""
     if args.rings_file:
         from arapkit.handles import load_rings
 
-        return load_rings(args.rings_file, n_vertices)
+        source = mesh.welded_from.source if mesh.welded_from is not None else mesh
+        rings = load_rings(args.rings_file, source.n_vertices)
+        if mesh.welded_from is not None:
+            from arapkit.weld import weld_values
+
+            rings = weld_values(mesh, np.asarray(rings))
+        return rings
     return int(args.rings)
+
+
+def _handles(args: argparse.Namespace, source, mesh):
+    """Handles resolved on the input's vertices, then mapped onto the solved mesh."""
+    from arapkit.handles import load_handles
+
+    hs = load_handles(args.handles, source.vertices, args.transform)
+    if mesh is source:
+        return hs
+    from arapkit.weld import weld_handle_set
+
+    return weld_handle_set(mesh, hs)
 
 
 def _report(args, mesh, hs, rings, res, wall_s: float) -> dict[str, Any]:
@@ -175,6 +199,11 @@ def _report(args, mesh, hs, rings, res, wall_s: float) -> dict[str, Any]:
             "handles": args.handles,
             "transform": args.transform,
             "rings_file": args.rings_file,
+            "weld": None if mesh.welded_from is None else {
+                "tol": mesh.welded_from.tol,
+                "input_vertices": mesh.welded_from.source.n_vertices,
+                "welded_vertices": mesh.n_vertices,
+            },
         },
         "parameters": {
             "rings": int(args.rings) if not args.rings_file else rings_summary(r),
@@ -208,15 +237,15 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit deform``; returns the exit status."""
     from arapkit import Deformer
     from arapkit.fileio import save_mesh, write_json
-    from arapkit.handles import load_handles
 
     t0 = time.perf_counter()
     _check_outputs(args)
-    mesh = load_mesh_checked(args.mesh)
-    for msg in mesh.notes:
+    source = load_mesh_checked(args.mesh)
+    mesh = maybe_weld(source, getattr(args, "weld", None))
+    for msg in mesh.notes if mesh is source else source.notes + mesh.notes:
         note(f"{args.mesh}: {msg}", args.quiet)
-    hs = load_handles(args.handles, mesh.vertices, args.transform)
-    rings = _rings(args, mesh.n_vertices)
+    hs = _handles(args, source, mesh)
+    rings = _rings(args, mesh)
     deformer = Deformer(
         mesh,
         hs.indices,
@@ -240,12 +269,15 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
 
     r_full = np.broadcast_to(np.asarray(deformer.rings), (mesh.n_vertices,))
-    save_mesh(
+    # like=mesh: the input's polygons, UVs, materials, colours and properties come out
+    # again, and a welded solve is written back to the input's own vertices
+    for line in save_mesh(
         args.output,
         res.vertices,
-        mesh.faces,
-        {"energy": res.vertex_energy, "rings": r_full.astype(np.int32)},
-    )
+        vertex_properties={"energy": res.vertex_energy, "rings": r_full.astype(np.int32)},
+        like=mesh,
+    ):
+        warn(line)
     report = _report(args, mesh, hs, r_full, res, wall)
     if args.report and args.report != "-":
         write_json(args.report, report)

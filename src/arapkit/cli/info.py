@@ -22,6 +22,10 @@ __all__ = ["add_parser", "inspect_mesh", "run"]
 
 #: Triangles with a corner angle below this (degrees) count as near-degenerate.
 NEEDLE_DEGREES = 1.0
+#: ``info`` calls a mesh a soup from this many single-triangle components ...
+SOUP_TRIANGLES = 1000
+#: ... or this many coincident vertices (and at least 1 % of all vertices).
+SOUP_COINCIDENT = 10
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -68,6 +72,7 @@ def inspect_mesh(mesh) -> dict[str, Any]:
     (1, 0)
     """
     from arapkit.weights import cotangent_weights
+    from arapkit.weld import soup_facts
 
     loops = mesh.boundary_loops
     labels = mesh.component_labels
@@ -89,6 +94,7 @@ def inspect_mesh(mesh) -> dict[str, Any]:
         "degenerate_faces_dropped": sum(mesh.dropped_faces.values()),
         "needle_faces": needles,
         "negative_cotan_weights": negative,
+        **soup_facts(mesh),
         "bounding_box_diagonal": mesh.bounding_box_diagonal,
         "repairs_on_load": list(mesh.notes),
     }
@@ -100,6 +106,15 @@ def _advice(f: dict[str, Any]) -> list[str]:
     out = []
     for note in f["repairs_on_load"]:
         out.append(f"on load: {note}")
+    soup = f["triangle_components"] >= SOUP_TRIANGLES or (
+        f["coincident_vertices"] >= max(SOUP_COINCIDENT, f["vertices"] // 100))
+    if soup:
+        out.append(
+            f"looks like a triangle soup or an unwelded file ({f['triangle_components']} "
+            f"single-triangle components, {f['coincident_vertices']} coincident vertices): "
+            "use --weld to merge coincident vertices for the solve (the output keeps the "
+            "input's vertices)"
+        )
     if f["components"] > 1:
         out.append(
             f"{f['components']} connected components: each component without a handle is "

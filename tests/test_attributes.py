@@ -1,0 +1,241 @@
+"""Nothing lost on the way out: UVs, normals, materials, polygons, colours, PLY properties.
+
+Every file here is written by the test itself, so the expected arrays are known by
+construction; the deformed positions are checked against the Python API.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from arapkit import Deformer, load_mesh
+from arapkit.attributes import polygon_area_vectors
+from arapkit.fileio import save_mesh
+
+CUBE_V = np.array(
+    [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],
+    dtype=float,
+)
+# six quads, outward orientation
+CUBE_Q = [[0, 3, 2, 1], [4, 5, 6, 7], [0, 1, 5, 4], [1, 2, 6, 5], [2, 3, 7, 6], [3, 0, 4, 7]]
+
+
+def cube_corner_uv() -> list[list[int]]:
+    """vt index (0-based) of every corner: vertices 0..5 have two vt each, 6 and 7 one
+    -> 14 vt in all, with seams at vertices 0..5."""
+    own: dict[int, list[int]] = {}
+    nxt = 0
+    for v in range(8):
+        k = 2 if v < 6 else 1
+        own[v] = list(range(nxt, nxt + k))
+        nxt += k
+    seen = dict.fromkeys(range(8), 0)
+    out = []
+    for q in CUBE_Q:
+        row = []
+        for v in q:
+            row.append(own[v][seen[v] % len(own[v])])
+            seen[v] += 1
+        out.append(row)
+    return out
+
+
+UV = np.array([[i / 13.0, ((7 * i) % 13) / 13.0] for i in range(14)])
+HEAD = ["mtllib cube.mtl", "o cube"]
+
+
+def cube_obj_text() -> str:
+    lines = ["# a textured cube", *HEAD]
+    lines += [f"v {x:g} {y:g} {z:g}" for x, y, z in CUBE_V]
+    lines += [f"vt {u!r} {v!r}" for u, v in UV.tolist()]
+    lines += ["vn 0 0 -1", "vn 0 0 1", "vn 0 -1 0", "vn 1 0 0", "vn 0 1 0", "vn -1 0 0"]
+    cuv = cube_corner_uv()
+    for f, q in enumerate(CUBE_Q):
+        if f == 0:
+            lines += ["g bottom_sides", "usemtl red", "s off"]
+        if f == 3:
+            lines += ["g rest", "usemtl blue"]
+        lines.append("f " + " ".join(f"{v + 1}/{t + 1}/{f + 1}" for v, t in
+                                     zip(q, cuv[f], strict=True)))
+    return "\n".join(lines) + "\n"
+
+
+def arapkit(*args) -> subprocess.CompletedProcess:
+    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+    return subprocess.run([sys.executable, "-m", "arapkit.cli", *map(str, args)],
+                          capture_output=True, text=True, env=env, timeout=600)
+
+
+def parse_obj_for_test(path: Path) -> dict:
+    """Independent minimal OBJ reader: lines by kind, corners as (v, vt, vn) 0-based."""
+    out: dict = {"v": [], "vt": [], "vn": [], "f": [], "other": []}
+    for line in path.read_text().splitlines():
+        t = line.split()
+        if not t or t[0].startswith("#"):
+            continue
+        if t[0] in ("v", "vt", "vn"):
+            out[t[0]].append([float(x) for x in t[1:]])
+        elif t[0] == "f":
+            out["f"].append([tuple(int(p) - 1 for p in c.split("/")) for c in t[1:]])
+        else:
+            out["other"].append(line.strip())
+    return out
+
+
+def handles_file(tmp_path: Path) -> Path:
+    h = tmp_path / "h.json"
+    h.write_text(json.dumps([
+        {"name": "base", "indices": [0, 1, 2, 3]},
+        {"name": "top", "indices": [6], "translate": [0.2, 0.1, 0.3]},
+    ]))
+    return h
+
+
+def test_textured_obj_round_trip_through_cli(tmp_path):
+    src = tmp_path / "cube.obj"
+    src.write_text(cube_obj_text())
+    out = tmp_path / "out.obj"
+    proc = arapkit("deform", src, "-H", handles_file(tmp_path), "-o", out, "-q")
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" not in proc.stderr  # OBJ -> OBJ loses nothing
+    got = parse_obj_for_test(out)
+    # same vt array, exactly
+    np.testing.assert_array_equal(np.array(got["vt"]), UV)
+    # same corner -> vertex and corner -> vt tables; quads stay quads
+    assert [[c[0] for c in f] for f in got["f"]] == CUBE_Q
+    assert [[c[1] for c in f] for f in got["f"]] == cube_corner_uv()
+    assert [[c[2] for c in f] for f in got["f"]] == [[f] * 4 for f in range(6)]
+    # mtllib / usemtl / g / o / s in their places
+    kinds = [ln if ln[0] != "f" else "f" for ln in out.read_text().splitlines()
+             if not ln.startswith(("v", "#"))]
+    assert kinds == ["mtllib cube.mtl", "o cube", "g bottom_sides", "usemtl red", "s off",
+                     "f", "f", "f", "g rest", "usemtl blue", "f", "f", "f"]
+    # positions: the Python API's result on the same file
+    mesh = load_mesh(src)
+    ref = Deformer(mesh, [0, 1, 2, 3, 6]).solve(
+        np.vstack([CUBE_V[:4], CUBE_V[6] + [0.2, 0.1, 0.3]])).vertices
+    V = np.array(got["v"])
+    np.testing.assert_allclose(V, ref, rtol=0, atol=1e-12)
+    assert np.linalg.norm(V - CUBE_V, axis=1).max() > 0.1  # really deformed
+    # normals: one per original vn (flat layout kept), recomputed from the deformed quads
+    N = np.array(got["vn"])
+    for f, q in enumerate(CUBE_Q):
+        P = V[q]
+        fan = sum(np.cross(P[t] - P[0], P[t + 1] - P[0]) for t in range(1, len(q) - 1))
+        np.testing.assert_allclose(N[f], fan / np.linalg.norm(fan), atol=1e-12)
+
+
+def test_obj_colours_and_degenerate_faces_written_back(tmp_path):
+    src = tmp_path / "c.obj"
+    src.write_text(
+        "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nv 1 1 0 0.5 0.25 0.125\n"
+        "f 1 2 3\nf 2 4 3\nf 1 1 2\nf 2 4 3\n"  # a repeated-vertex face and a duplicate
+    )
+    mesh = load_mesh(src)
+    assert mesh.n_faces == 2
+    V = mesh.vertices + [0, 0, 1.5]
+    out = tmp_path / "o.obj"
+    assert save_mesh(out, V, like=mesh) == []
+    got = parse_obj_for_test(out)
+    np.testing.assert_array_equal(np.array(got["v"])[:, 3:],
+                                  [[1, 0, 0], [0, 1, 0], [0, 0, 1], [0.5, 0.25, 0.125]])
+    np.testing.assert_array_equal(np.array(got["v"])[:, :3], V)
+    assert [[c[0] for c in f] for f in got["f"]] == [[0, 1, 2], [1, 3, 2], [0, 0, 1],
+                                                      [1, 3, 2]]
+
+
+PLY_HEAD = """ply
+format ascii 1.0
+comment colours, a float and an int property, one quad
+element vertex 5
+property float x
+property float y
+property float z
+property uchar red
+property uchar green
+property uchar blue
+property uchar alpha
+property float quality
+property int label
+element face 3
+property list uchar int vertex_indices
+property ushort part
+end_header
+"""
+PLY_V = [
+    "0 0 0 255 0 0 255 0.5 7",
+    "1 0 0 0 255 0 128 0.25 -3",
+    "1 1 0 0 0 255 0 1.5 2",
+    "0 1 0 10 20 30 40 2 1",
+    "2 0.5 0 1 2 3 4 3.125 -70000",
+]
+PLY_F = ["4 0 1 2 3 11", "3 1 4 2 65535", "3 0 0 1 2"]
+
+
+def test_ply_colours_and_properties_kept_exactly(tmp_path):
+    src = tmp_path / "p.ply"
+    src.write_text(PLY_HEAD + "\n".join(PLY_V + PLY_F) + "\n")
+    out = tmp_path / "out.ply"
+    h = tmp_path / "h.json"
+    h.write_text(json.dumps([{"indices": [0, 3]}, {"indices": [4], "translate": [0, 0, 0.5]}]))
+    proc = arapkit("deform", src, "-H", h, "-o", out, "-q")
+    assert proc.returncode == 0, proc.stderr
+    assert "warning" not in proc.stderr
+    # plyfile as the independent reader (trimesh cannot read mixed polygon sizes in
+    # binary PLY)
+    plyfile = pytest.importorskip("plyfile")
+    ply = plyfile.PlyData.read(str(out))
+    vert, face = ply["vertex"], ply["face"]
+    names = [p.name for p in vert.properties]
+    assert names[:9] == ["x", "y", "z", "red", "green", "blue", "alpha", "quality", "label"]
+    types = {p.name: p.val_dtype for p in vert.properties}
+    assert [types[k] for k in ("red", "alpha", "quality", "label")] == ["u1", "u1", "f4", "i4"]
+    cols = np.array([[float(t) for t in row.split()] for row in PLY_V])
+    for j, name in enumerate(["red", "green", "blue", "alpha", "quality", "label"]):
+        np.testing.assert_array_equal(vert[name], cols[:, 3 + j])
+    assert {"energy", "rings"} <= set(names)  # arapkit's own per-vertex values stay
+    polys = [list(map(int, p)) for p in face["vertex_indices"]]
+    assert polys == [[0, 1, 2, 3], [1, 4, 2], [0, 0, 1]]  # the quad and the degenerate face
+    np.testing.assert_array_equal(face["part"], [11, 65535, 2])
+    assert {p.name: p.val_dtype for p in face.properties}["part"] == "u2"
+    V = np.stack([vert[c] for c in "xyz"], axis=1)
+    np.testing.assert_allclose(V[[0, 3]], cols[[0, 3], :3], atol=1e-12)
+    np.testing.assert_allclose(V[4], [2, 0.5, 0.5], atol=1e-12)
+    # and arapkit reads its own output back with everything on it
+    again = load_mesh(out)
+    assert again.attributes.face_sizes.tolist() == [4, 3, 3]
+    assert again.attributes.vertex_properties["label"].tolist() == [7, -3, 2, 1, -70000]
+
+
+def test_warnings_where_the_format_has_no_place(tmp_path):
+    src = tmp_path / "cube.obj"
+    src.write_text(cube_obj_text())
+    out = tmp_path / "out.off"
+    proc = arapkit("deform", src, "-H", handles_file(tmp_path), "-o", out, "-q")
+    assert proc.returncode == 0, proc.stderr
+    warns = [ln for ln in proc.stderr.splitlines() if ln.startswith("arapkit: warning: ")]
+    assert len(warns) == 3, proc.stderr
+    joined = " ".join(warns)
+    assert "texture coordinates (vt)" in joined and "normals (vn)" in joined
+    assert "materials/groups (g, mtllib, o, s, usemtl)" in joined
+    # OFF keeps the quads
+    lines = out.read_text().splitlines()
+    assert lines[1] == "8 6 0" and all(ln.startswith("4 ") for ln in lines[10:16])
+    # STL additionally splits the polygons
+    mesh = load_mesh(src)
+    w = save_mesh(tmp_path / "o.stl", mesh.vertices, like=mesh)
+    assert any("polygons were split" in x for x in w) and len(w) == 4
+
+
+def test_normals_follow_the_area_weighted_rule():
+    V = np.array([[0.0, 0, 0], [2, 0, 0], [0, 1, 0], [0, 0, 3]])
+    sizes, corners = np.array([3, 3]), np.array([0, 1, 2, 0, 2, 3])
+    A = polygon_area_vectors(V, sizes, corners)
+    np.testing.assert_allclose(A, [[0, 0, 1.0], [1.5, 0, 0]])
