@@ -83,7 +83,8 @@ def parse_obj_for_test(path: Path) -> dict:
         if t[0] in ("v", "vt", "vn"):
             out[t[0]].append([float(x) for x in t[1:]])
         elif t[0] == "f":
-            out["f"].append([tuple(int(p) - 1 for p in c.split("/")) for c in t[1:]])
+            out["f"].append([tuple(int(p) - 1 if p else -1 for p in c.split("/"))
+                             for c in t[1:]])
         else:
             out["other"].append(line.strip())
     return out
@@ -239,3 +240,37 @@ def test_normals_follow_the_area_weighted_rule():
     sizes, corners = np.array([3, 3]), np.array([0, 1, 2, 0, 2, 3])
     A = polygon_area_vectors(V, sizes, corners)
     np.testing.assert_allclose(A, [[0, 0, 1.0], [1.5, 0, 0]])
+
+
+def test_smooth_normals_are_area_weighted_vertex_normals(tmp_path):
+    """One vn per vertex (f v//v): after a deformation each is the normalised sum of
+    the cross products of the triangles around the vertex, computed here by loops."""
+    n = 5
+    x, y = np.meshgrid(np.linspace(0, 1, n), np.linspace(0, 1, n))
+    V = np.stack([x.ravel(), y.ravel(), np.zeros(n * n)], axis=1)
+    F = []
+    for i in range(n - 1):
+        for j in range(n - 1):
+            a, b, c, d = i * n + j, i * n + j + 1, (i + 1) * n + j, (i + 1) * n + j + 1
+            F += [[a, b, d], [a, d, c]]
+    lines = [f"v {p[0]!r} {p[1]!r} {p[2]!r}" for p in V.tolist()]
+    lines += ["vn 0 0 1"] * len(V)
+    lines += ["f " + " ".join(f"{v + 1}//{v + 1}" for v in f) for f in F]
+    src = tmp_path / "g.obj"
+    src.write_text("\n".join(lines) + "\n")
+    mesh = load_mesh(src)
+    bent = mesh.vertices + np.stack([np.zeros(n * n), np.zeros(n * n),
+                                     0.3 * np.sin(3 * V[:, 0]) * V[:, 1] ** 2], axis=1)
+    out = tmp_path / "o.obj"
+    assert save_mesh(out, bent, like=mesh) == []
+    got = parse_obj_for_test(out)
+    N = np.array(got["vn"])
+    expect = np.zeros_like(V)
+    for f in F:
+        P = bent[f]
+        cr = np.cross(P[1] - P[0], P[2] - P[0])
+        for v in f:
+            expect[v] += cr
+    expect /= np.linalg.norm(expect, axis=1, keepdims=True)
+    np.testing.assert_allclose(N, expect, atol=1e-12)
+    assert [[c[2] for c in f] for f in got["f"]] == F

@@ -37,8 +37,10 @@ def load_text(tmp_path, name: str, text: str):
         ("lines.obj", TRI + "l 1 2\nl 2 3\n",
          r"lines.obj: no faces: the file has only line/point elements \(2\)"),
         ("empty.obj", TRI, r"empty.obj: no faces: the file has no 'f' lines"),
-        ("vt.obj", TRI + "vt 0 0\nf 1/1 2/2 3/1\n", r"vt.obj: line 5: face 0 references a uv "
+        ("vt.obj", TRI + "vt 0 0\nf 1/1 2/2 3/1\n", r"vt.obj: line 5: face 0 references a 'vt' "
          r"index beyond the 1 defined"),
+        ("vn.obj", TRI + "f 1//1 2//1 3//1\n",
+         r"vn.obj: line 4: face 0 references a 'vn' index beyond the 0 defined"),
         ("bigobj.obj", TRI + "f 1 2 100000000000000000000000\n",
          r"bigobj.obj: line 4: vertex index 100000000000000000000000 is too large"),
         ("shortv.obj", "v 0 0 0\nv 1 0\nv 0 1 0\nf 1 2 3\n",
@@ -69,6 +71,21 @@ def test_messages_on_the_command_line(tmp_path):
     assert proc.returncode == 2 and "Traceback" not in proc.stderr
     assert proc.stderr.strip().splitlines() == [
         f"arapkit: error: {p}: face 0 references a vertex index too large for any mesh"]
+
+
+@pytest.mark.parametrize(
+    ("vertices", "faces", "pattern"),
+    [
+        (np.eye(3), np.array([0, 1, 2]), r"m: faces must be an \(m, 3\) array .* shape \(3,\)"),
+        (np.eye(3).astype(str), [[0, 1, 2]], "m: vertices must be real numbers, got text"),
+        (np.eye(3) + 1j, [[0, 1, 2]], "m: vertices must be real numbers, got complex"),
+        (np.eye(3) > 0, [[0, 1, 2]], "m: vertices must be real numbers, got boolean"),
+        (np.eye(3), 5, r"m: faces must be an \(m, 3\) array or a list of polygons"),
+    ],
+)
+def test_python_api_refuses_wrong_types(vertices, faces, pattern):
+    with pytest.raises(InputError, match=pattern):
+        Mesh(vertices, faces, name="m")
 
 
 def test_empty_face_list_in_python():

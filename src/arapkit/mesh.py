@@ -157,7 +157,19 @@ class Mesh:
     # -- validation -------------------------------------------------------
     def _check_vertices(self, vertices) -> np.ndarray:
         try:
-            V = np.array(vertices, dtype=np.float64)
+            raw = np.asarray(vertices)
+        except (TypeError, ValueError) as exc:
+            raise InputError(f"{self.name}: vertices are not numeric ({exc})") from None
+        # numpy would parse strings and drop imaginary parts without a word
+        real = raw.dtype.kind in "iuf" or (raw.dtype.kind == "O" and all(
+            isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool)
+            for x in raw.ravel()))
+        if not real:
+            kind = {"U": "text", "S": "text", "c": "complex", "b": "boolean"}.get(
+                raw.dtype.kind, "non-numeric")
+            raise InputError(f"{self.name}: vertices must be real numbers, got {kind} values")
+        try:
+            V = np.array(raw, dtype=np.float64)
         except (TypeError, ValueError) as exc:
             raise InputError(f"{self.name}: vertices are not numeric ({exc})") from None
         if V.ndim != 2 or V.shape[1] != 3:
@@ -174,6 +186,13 @@ class Mesh:
 
     def _check_faces(self, faces) -> np.ndarray:
         n = len(self.vertices)
+        if not hasattr(faces, "__len__") or isinstance(faces, (str, bytes)):
+            raise InputError(f"{self.name}: faces must be an (m, 3) array or a list of polygons")
+        if isinstance(faces, np.ndarray) and faces.dtype != object and faces.ndim != 2:
+            raise InputError(
+                f"{self.name}: faces must be an (m, 3) array or a list of polygons, "
+                f"got an array of shape {faces.shape}"
+            )
         if len(faces) == 0:
             raise InputError(f"{self.name}: mesh has no faces")
         if not isinstance(faces, np.ndarray) and len(faces) and all(len(f) == 3 for f in faces):
@@ -580,29 +599,34 @@ def _parse_obj(text: str, path: str) -> tuple[np.ndarray, np.ndarray | list, Mes
         )
     V = _obj_vertices(verts, vlines, path)
     extra = V[:, 3:] if V.shape[1] > 3 else None
+    if len({len(t) for t in verts}) > 1:
+        lost = ["numbers after x y z found on only some 'v' lines"]
+    else:
+        lost = []
     attrs = MeshAttributes(
         "obj",
         np.asarray(sizes, dtype=np.int64),
         C,
         vertex_extra=extra,
         statements=statements,
+        lost=lost,
     )
-    for vals, idx, name, width in ((uvs, cuv, "uv", 2), (nrms, cnrm, "normal", 3)):
+    for vals, idx, key in ((uvs, cuv, "vt"), (nrms, cnrm, "vn")):
         ix = np.asarray(idx, dtype=np.int64)
         if not np.any(ix >= 0):
             continue
-        if len(vals) and len({len(v) for v in vals}) == 1 and len(vals[0]) >= width - 1:
-            arr = np.asarray(vals, dtype=np.float64)
-        else:
-            attrs.lost.append(f"'{'vt' if name == 'uv' else 'vn'}' lines of unequal length")
-            continue
-        if np.any(ix >= len(arr)):
-            f = int(np.searchsorted(np.cumsum(sizes), np.flatnonzero(ix >= len(arr))[0], "right"))
+        if ix.max() >= len(vals):
+            f = int(np.searchsorted(np.cumsum(sizes), np.flatnonzero(ix >= len(vals))[0],
+                                    "right"))
             raise InputError(
-                f"{path}: line {face_lines[f]}: face {f} references a {name} index beyond the "
-                f"{len(arr)} defined"
+                f"{path}: line {face_lines[f]}: face {f} references a '{key}' index beyond the "
+                f"{len(vals)} defined"
             )
-        if name == "uv":
+        if len({len(v) for v in vals}) != 1:
+            attrs.lost.append(f"'{key}' lines of unequal length")
+            continue
+        arr = np.asarray(vals, dtype=np.float64)
+        if key == "vt":
             attrs.uv, attrs.corner_uv = arr, ix
         else:
             attrs.normals, attrs.corner_normal = arr, ix

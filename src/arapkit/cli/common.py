@@ -103,7 +103,8 @@ def add_weld_option(p: argparse.ArgumentParser) -> None:
         metavar="TOL",
         help="merge vertices closer than TOL times the bounding-box diagonal "
         f"(default {WELD_TOL:g}) for the solve, for triangle soups and split-vertex files; "
-        "results are written to the input's own vertices",
+        "results are written to the input's own vertices (put it after MESH, or write "
+        "--weld=TOL)",
     )
 
 
