@@ -318,7 +318,10 @@ def _describe_rings(r: np.ndarray) -> str:
 def _print_summary(args, mesh, hs, res, wall: float) -> None:
     lines = [
         f"output: {args.output}",
-        f"vertices: {mesh.n_vertices}",
+        f"vertices: {mesh.n_vertices}"
+        + ("" if mesh.welded_from is None else
+           f" (welded from the input's {mesh.welded_from.source.n_vertices}; the output "
+           "has the input's vertices)"),
         f"faces: {mesh.n_faces}",
         f"handles: {len(hs.indices)} in {len(hs.groups)} group(s)",
         f"iterations: {res.iterations}",
