@@ -274,3 +274,55 @@ def test_smooth_normals_are_area_weighted_vertex_normals(tmp_path):
     expect /= np.linalg.norm(expect, axis=1, keepdims=True)
     np.testing.assert_allclose(N, expect, atol=1e-12)
     assert [[c[2] for c in f] for f in got["f"]] == F
+
+
+def _free_port() -> int:
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_editor_export_keeps_the_obj_attributes(tmp_path):
+    """An OBJ opened in the editor exports the PLY as before plus an OBJ with its UVs."""
+    import argparse
+
+    pytest.importorskip("viser")
+    from arapkit.cli.edit import build_state
+    from arapkit.editor.app import EditorApp
+
+    ns = argparse.Namespace(mesh=None, rings_file=None, rings=1, handles=None, session=None)
+    app = EditorApp(build_state(ns), port=_free_port(), export_dir=tmp_path / "out")
+    try:
+        app.open_mesh_bytes("cube.obj", cube_obj_text().encode())
+        paths = app.export()
+        assert [p.name for p in paths] == ["cube-deformed.ply", "cube-rings.txt",
+                                           "cube-deformed.obj"]
+        got = parse_obj_for_test(paths[2])
+        np.testing.assert_array_equal(np.array(got["vt"]), UV)
+        assert [[c[1] for c in f] for f in got["f"]] == cube_corner_uv()
+        assert "usemtl blue" in paths[2].read_text()
+    finally:
+        app.stop()
+
+
+def test_colours_cross_formats(tmp_path):
+    """PLY uchar colours -> OBJ floats (/255) -> PLY uchar again, unchanged."""
+    src = tmp_path / "p.ply"
+    src.write_text(PLY_HEAD + "\n".join(PLY_V + PLY_F) + "\n")
+    mesh = load_mesh(src)
+    obj = tmp_path / "p.obj"
+    warn = save_mesh(obj, mesh.vertices, like=mesh)
+    assert len(warn) == 2 and "quality, label" in warn[0] and "part" in warn[1]
+    cols = np.array([[float(t) for t in row.split()][3:7] for row in PLY_V])
+    got = np.array(parse_obj_for_test(obj)["v"])
+    np.testing.assert_allclose(got[:, 3:], cols / 255.0, rtol=0, atol=1e-15)
+    back = load_mesh(obj)
+    ply = tmp_path / "q.ply"
+    assert save_mesh(ply, back.vertices, like=back) == []
+    plyfile = pytest.importorskip("plyfile")
+    v = plyfile.PlyData.read(str(ply))["vertex"]
+    for j, c in enumerate(["red", "green", "blue", "alpha"]):
+        assert v[c].dtype == np.uint8
+        np.testing.assert_array_equal(v[c], cols[:, j])

@@ -15,7 +15,7 @@ from conftest import data_path
 from arapkit import Deformer, InputError, Mesh, load_mesh
 from arapkit.fileio import read_ply_vertex_properties, save_mesh
 from arapkit.mesh import weld
-from arapkit.weld import soup_facts, to_source, weld_handles, weld_values
+from arapkit.welding import soup_facts, to_source, weld_handles, weld_values
 
 
 def arapkit(*args) -> subprocess.CompletedProcess:

@@ -301,7 +301,7 @@ def save_mesh(
         formats drop them because they have no place for them.
     like : Mesh, optional
         The mesh ``vertices`` belong to (the loaded input, or a mesh made by
-        :func:`arapkit.weld.weld`, whose values are then written to the input's own
+        :func:`arapkit.welding.weld`, whose values are then written to the input's own
         vertices). Everything its file carried is written again: the original polygons
         (also faces dropped as degenerate), UVs with their seams, normals recomputed
         from ``vertices``, OBJ materials and groups, colours, PLY properties. See

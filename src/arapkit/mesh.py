@@ -822,7 +822,7 @@ def _mesh_with_attributes(V, F, name: str, attrs: MeshAttributes) -> Mesh:
 
 
 def weld(mesh: Mesh, tol: float | None = None) -> Mesh:
-    """Merge coincident vertices; see :func:`arapkit.weld.weld` (the same function)."""
-    from .weld import weld as _weld
+    """Merge coincident vertices; see :func:`arapkit.welding.weld` (the same function)."""
+    from .welding import weld as _weld
 
     return _weld(mesh, tol)

@@ -91,8 +91,8 @@ def weld_tolerance(text: str) -> float:
 
 
 def add_weld_option(p: argparse.ArgumentParser) -> None:
-    """``--weld [TOL]``: merge coincident vertices for the solve (see :mod:`arapkit.weld`)."""
-    from arapkit.weld import WELD_TOL
+    """``--weld [TOL]``: merge coincident vertices for the solve (see :mod:`arapkit.welding`)."""
+    from arapkit.welding import WELD_TOL
 
     p.add_argument(
         "--weld",
@@ -112,7 +112,7 @@ def maybe_weld(mesh, tol: float | None):
     """``mesh`` welded with ``tol`` (relative), or ``mesh`` itself when ``tol`` is None."""
     if tol is None:
         return mesh
-    from arapkit.weld import weld
+    from arapkit.welding import weld
 
     return weld(mesh, tol)
 

@@ -163,7 +163,7 @@ def _rings(args: argparse.Namespace, mesh) -> np.ndarray | int:
         source = mesh.welded_from.source if mesh.welded_from is not None else mesh
         rings = load_rings(args.rings_file, source.n_vertices)
         if mesh.welded_from is not None:
-            from arapkit.weld import weld_values
+            from arapkit.welding import weld_values
 
             rings = weld_values(mesh, np.asarray(rings))
         return rings
@@ -177,7 +177,7 @@ def _handles(args: argparse.Namespace, source, mesh):
     hs = load_handles(args.handles, source.vertices, args.transform)
     if mesh is source:
         return hs
-    from arapkit.weld import weld_handle_set
+    from arapkit.welding import weld_handle_set
 
     return weld_handle_set(mesh, hs)
 

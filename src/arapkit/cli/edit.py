@@ -114,14 +114,14 @@ def build_state(args: argparse.Namespace) -> Any:
     if args.rings_file:
         rings = load_rings(args.rings_file, source.n_vertices)
         if welded is not None:
-            from arapkit.weld import weld_values
+            from arapkit.welding import weld_values
 
             rings = weld_values(st.mesh, rings)
         st.rings = st._check_rings(rings)
     if args.handles:
         hs = load_handles(args.handles, source.vertices)
         if welded is not None:
-            from arapkit.weld import weld_handle_set
+            from arapkit.welding import weld_handle_set
 
             hs = weld_handle_set(st.mesh, hs)
         st.add_handle_set(hs, record=False)

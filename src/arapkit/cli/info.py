@@ -72,7 +72,7 @@ def inspect_mesh(mesh) -> dict[str, Any]:
     (1, 0)
     """
     from arapkit.weights import cotangent_weights
-    from arapkit.weld import soup_facts
+    from arapkit.welding import soup_facts
 
     loops = mesh.boundary_loops
     labels = mesh.component_labels

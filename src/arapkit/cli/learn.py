@@ -269,7 +269,7 @@ def _learn(args, frames: Frames, ref: int):
     others = [i for i in range(len(frames)) if i != ref]
     poses = [frames.vertices[i] for i in others]
     if getattr(args, "weld", None) is not None:
-        from arapkit.weld import weld, weld_frame
+        from arapkit.welding import weld, weld_frame
 
         # every frame shares the reference's vertices, so one weld map serves them all
         reference = weld(reference, args.weld)
@@ -289,7 +289,7 @@ def _learn(args, frames: Frames, ref: int):
 
 def _write(args, reference, res) -> None:
     from arapkit.handles import save_rings
-    from arapkit.weld import to_source
+    from arapkit.welding import to_source
 
     # a welded reference: the map is written for the input's own vertices
     save_rings(args.output, to_source(reference, res.rings))

@@ -685,7 +685,7 @@ class EditorState:
         mesh_file = Path(path).parent / mesh_path
         mesh = load_mesh(str(mesh_file))
         if d.get("weld") is not None:
-            from arapkit.weld import weld
+            from arapkit.welding import weld
 
             mesh = weld(mesh, d["weld"])
         st = cls(mesh, mesh_path=str(mesh_file))

@@ -133,7 +133,7 @@ def weld(mesh: Mesh, tol: float | None = None) -> Mesh:
 def _map(mesh: Mesh) -> WeldMap:
     wf = getattr(mesh, "welded_from", None)
     if wf is None:
-        raise ValueError(f"{mesh.name} is not a welded mesh (make it with arapkit.weld.weld)")
+        raise ValueError(f"{mesh.name} is not a welded mesh (make it with arapkit.welding.weld)")
     return wf
 
 
