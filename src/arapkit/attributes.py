@@ -112,14 +112,6 @@ class MeshAttributes:
             return self.vertex_extra / 255.0 if big else self.vertex_extra
         return None
 
-    def take_vertices(self, index: np.ndarray) -> MeshAttributes:
-        """Attributes for a mesh whose vertex ``i`` is this mesh's vertex ``index[i]``."""
-        out = MeshAttributes(**{k: getattr(self, k) for k in self.__dataclass_fields__})
-        if self.vertex_extra is not None:
-            out.vertex_extra = self.vertex_extra[index]
-        out.vertex_properties = {k: v[index] for k, v in self.vertex_properties.items()}
-        return out
-
 
 def polygon_area_vectors(vertices: np.ndarray, sizes: np.ndarray, corners: np.ndarray):
     """Area vector of every polygon (normal times area), by Newell's formula.

@@ -15,6 +15,7 @@ Examples
 >>> d = pathlib.Path(tempfile.mkdtemp())
 >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]); F = np.array([[0, 1, 2]])
 >>> save_mesh(d / "t.ply", V, F, vertex_properties={"rings": np.array([1, 2, 3])})
+[]
 >>> read_ply_vertex_properties(d / "t.ply")["rings"].tolist()
 [1, 2, 3]
 """
@@ -372,6 +373,7 @@ def read_ply_vertex_properties(path: str | os.PathLike) -> dict[str, np.ndarray]
     >>> import tempfile, pathlib, numpy as np
     >>> p = pathlib.Path(tempfile.mkdtemp()) / "t.ply"
     >>> save_mesh(p, np.eye(3), np.array([[0, 1, 2]]), {"energy": np.array([0.5, 1, 2])})
+    []
     >>> read_ply_vertex_properties(p)["energy"].tolist()
     [0.5, 1.0, 2.0]
     """

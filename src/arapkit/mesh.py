@@ -783,7 +783,7 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     Examples
     --------
     >>> m = load_mesh("../shared/data/meshes/plane.off")  # doctest: +SKIP
-    >>> m.n_vertices
+    >>> m.n_vertices  # doctest: +SKIP
     841
     """
     path = os.fspath(path)
