@@ -326,3 +326,21 @@ def test_colours_cross_formats(tmp_path):
     for j, c in enumerate(["red", "green", "blue", "alpha"]):
         assert v[c].dtype == np.uint8
         np.testing.assert_array_equal(v[c], cols[:, j])
+
+
+def test_binary_ply_with_mixed_polygons_reads_back(tmp_path):
+    """Sizes 4, 5, 3 total 12 = 3 x 4: trimesh reads such a binary file as three quads
+    without complaint; the loader must notice and read the real polygons."""
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [2, 0, 0], [2, 1, 0.5],
+                  [1.5, 2, 0], [3, 0, 0]], dtype=float)
+    src = tmp_path / "m.obj"
+    src.write_text("".join(f"v {x} {y} {z}\n" for x, y, z in V)
+                   + "f 1 2 3 4\nf 2 5 6 7 3\nf 5 8 6\n")
+    mesh = load_mesh(src)
+    out = tmp_path / "m.ply"
+    assert save_mesh(out, mesh.vertices, like=mesh) == []
+    back = load_mesh(out)
+    assert [p.tolist() for p in back.attributes.polygons()] == [
+        [0, 1, 2, 3], [1, 4, 5, 6, 2], [4, 7, 5]]
+    np.testing.assert_array_equal(back.vertices, V)
+    np.testing.assert_array_equal(back.faces, mesh.faces)

@@ -697,6 +697,26 @@ def _ply_columns(element: dict) -> dict[str, np.ndarray]:
     return out
 
 
+def _lists_consistent(raw: dict) -> bool:
+    """Whether every fixed-length list trimesh read has the length each record declares.
+
+    trimesh reads binary lists with the first record's length for all of them; a file
+    mixing triangles and quads whose total happens to fit is then read as garbage.
+    """
+    for element in raw.values():
+        data = element.get("data")
+        if not hasattr(data, "dtype") or data.dtype.names is None:
+            continue
+        for name in data.dtype.names:
+            col = data[name]
+            if col.dtype.names and len(col.dtype.names) == 2:
+                count, values = col[col.dtype.names[0]], col[col.dtype.names[1]]
+                width = values.shape[-1] if values.ndim > 1 else 1
+                if np.any(np.asarray(count).ravel() != width):
+                    return False
+    return True
+
+
 def _read_ply(data: bytes, path: str) -> dict:
     """Raw PLY elements as ``{name: {"data": columns, "properties": {name: dtype}}}``.
 
@@ -706,9 +726,9 @@ def _read_ply(data: bytes, path: str) -> dict:
     try:
         m = _load_with_trimesh(data, "ply", path)
         raw = getattr(m, "metadata", {}).get("_ply_raw")
-        if raw:
+        if raw and _lists_consistent(raw):
             return raw
-        first_error = "no PLY elements"
+        first_error = f"{path}: cannot parse as PLY"
     except InputError as exc:
         first_error = str(exc)
     try:
