@@ -344,3 +344,31 @@ def test_binary_ply_with_mixed_polygons_reads_back(tmp_path):
         [0, 1, 2, 3], [1, 4, 5, 6, 2], [4, 7, 5]]
     np.testing.assert_array_equal(back.vertices, V)
     np.testing.assert_array_equal(back.faces, mesh.faces)
+
+
+def test_off_normals_recomputed_and_colours_kept(tmp_path):
+    """CNOFF: x y z, then a normal, then a colour. The normal follows the deformed shape,
+    the colour is copied, and an OBJ gets them as vn (one per vertex) and v colours."""
+    src = tmp_path / "t.off"
+    src.write_text("CNOFF\n4 2 0\n"
+                   "0 0 0 0 0 1 255 0 0 255\n1 0 0 0 0 1 0 255 0 255\n"
+                   "0 1 0 0 0 1 0 0 255 255\n1 1 0 0 0 1 9 9 9 255\n"
+                   "3 0 1 2\n3 1 3 2\n")
+    mesh = load_mesh(src)
+    # rotate by 90 degrees about x: every normal becomes (0, -1, 0)
+    R = np.array([[1.0, 0, 0], [0, 0, -1], [0, 1, 0]])
+    V = mesh.vertices @ R.T
+    out = tmp_path / "o.off"
+    assert save_mesh(out, V, like=mesh) == []
+    rows = np.array([[float(t) for t in ln.split()] for ln in out.read_text().splitlines()[2:6]])
+    assert out.read_text().splitlines()[0] == "CNOFF"
+    np.testing.assert_allclose(rows[:, :3], V, atol=0)
+    np.testing.assert_allclose(rows[:, 3:6], [[0, -1, 0]] * 4, atol=1e-15)
+    np.testing.assert_array_equal(rows[:, 6:], [[255, 0, 0, 255], [0, 255, 0, 255],
+                                                [0, 0, 255, 255], [9, 9, 9, 255]])
+    obj = tmp_path / "o.obj"
+    assert save_mesh(obj, V, like=mesh) == []
+    got = parse_obj_for_test(obj)
+    np.testing.assert_allclose(np.array(got["vn"]), [[0, -1, 0]] * 4, atol=1e-15)
+    np.testing.assert_allclose(np.array(got["v"])[:, 3:], rows[:, 6:] / 255.0)
+    assert [[c[2] for c in f] for f in got["f"]] == [[0, 1, 2], [1, 3, 2]]

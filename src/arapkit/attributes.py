@@ -106,7 +106,9 @@ class MeshAttributes:
             names = ["red", "green", "blue"] + (["alpha"] if "alpha" in p else [])
             cols = np.stack([np.asarray(p[c], dtype=np.float64) for c in names], axis=1)
             return cols / 255.0 if p["red"].dtype.kind in "iu" else cols
-        if self.vertex_extra is not None and self.vertex_extra.shape[1] in (3, 4):
+        # OFF says by its keyword (COFF, CNOFF ...) whether the numbers are colours
+        off_colour = self.source_format != "off" or "C" in self.off_keyword[:-3]
+        if off_colour and self.vertex_extra is not None and self.vertex_extra.shape[1] in (3, 4):
             # OBJ colours are 0..1; OFF files often use 0..255
             big = self.vertex_extra.size and float(np.max(self.vertex_extra)) > 1.0
             return self.vertex_extra / 255.0 if big else self.vertex_extra

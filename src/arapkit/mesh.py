@@ -481,6 +481,13 @@ def _parse_off(text: str, path: str) -> tuple[np.ndarray, np.ndarray | list, Mes
         sizes = np.array([len(p) for p in polys], dtype=np.int64)
         corners = _corner_array(polys, path)
     attrs = MeshAttributes("off", sizes, corners, vertex_extra=extra, off_keyword=keyword)
+    if len({len(t) for _, t in vrows}) > 1:
+        attrs.lost.append("numbers after x y z found on only some vertex lines")
+    if "N" in keyword[:-3] and extra is not None and extra.shape[1] >= 3:
+        # NOFF: per-vertex normals come first after x y z; keep them as normals (one per
+        # vertex) so that they are recomputed on output instead of copied stale
+        attrs.normals, attrs.corner_normal = extra[:, :3], corners.copy()
+        attrs.vertex_extra = extra[:, 3:] if extra.shape[1] > 3 else None
     return V, faces, attrs
 
 

@@ -87,7 +87,8 @@ def _obj(V: np.ndarray, attrs: MeshAttributes) -> bytes:
     stmts = sorted(attrs.statements, key=lambda s: s[0])  # stable: file order per position
     head = [s for pos, s in stmts if pos == 0]
     lines += head
-    extra = attrs.vertex_extra if attrs.source_format != "ply" else attrs.colors()
+    # an OBJ's own numbers verbatim; colours of other sources as 0..1 floats
+    extra = attrs.vertex_extra if attrs.source_format == "obj" else attrs.colors()
     if extra is None:
         buf = [f"v {x:.17g} {y:.17g} {z:.17g}" for x, y, z in V.tolist()]
     else:
@@ -124,6 +125,11 @@ def _off(V: np.ndarray, attrs: MeshAttributes) -> bytes:
     src_off = attrs.source_format == "off"
     extra = attrs.vertex_extra if src_off else None
     keyword = attrs.off_keyword if src_off else "OFF"
+    if src_off and attrs.normals is not None:
+        # NOFF normals, recomputed per vertex from the deformed shape, go first
+        N = recompute_normals(V, attrs.face_sizes, attrs.face_corners, attrs.corner_normal,
+                              attrs.normals)
+        extra = N if extra is None else np.hstack([N, extra])
     lines = [keyword, f"{len(V)} {attrs.n_faces} 0"]
     if extra is None:
         lines += [f"{x:.17g} {y:.17g} {z:.17g}" for x, y, z in V.tolist()]
@@ -225,7 +231,9 @@ def write_with_attributes(
     ['OFF cannot carry them: OBJ materials/groups (mtllib) were not written']
     """
     if fmt == "obj":
-        keep = {"polygons", "uv", "normals", "statements", "colors", "vertex_extra"}
+        keep = {"polygons", "uv", "normals", "statements", "colors"}
+        if attrs.source_format == "obj":
+            keep.add("vertex_extra")
         return _obj(V, attrs), _lost(attrs, fmt, keep)
     if fmt == "ply":
         keep = {"polygons", "colors", "vertex_properties", "face_properties"}
@@ -233,6 +241,6 @@ def write_with_attributes(
     if fmt == "off":
         keep = {"polygons"}
         if attrs.source_format == "off":
-            keep |= {"colors", "vertex_extra"}
+            keep |= {"colors", "vertex_extra", "normals"}
         return _off(V, attrs), _lost(attrs, fmt, keep)
     return trimesh_bytes(V, _fan(attrs), fmt), _lost(attrs, fmt, set())
