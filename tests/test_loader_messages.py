@@ -171,3 +171,13 @@ def test_degenerate_input_deforms_to_finite_output(tmp_path, weights):
     out = tmp_path / "out.obj"
     save_mesh(out, res.vertices, like=m)
     assert sum(ln.startswith("f ") for ln in out.read_text().splitlines()) == len(F)
+
+
+def test_ply_header_count_not_a_whole_number(tmp_path):
+    p = tmp_path / "h.ply"
+    p.write_text("ply\nformat ascii 1.0\nelement vertex 3.0\nproperty float x\n"
+                 "property float y\nproperty float z\nelement face 1\n"
+                 "property list uchar int vertex_indices\nend_header\n"
+                 "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    with pytest.raises(InputError, match=r"h.ply: "):
+        load_mesh(p)

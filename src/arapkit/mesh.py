@@ -670,13 +670,19 @@ def _load_with_trimesh(data: bytes, ext: str, path: str):
     return m
 
 
-def _ply_header_counts(data: bytes) -> dict[str, int]:
+def _ply_header_counts(data: bytes, path: str) -> dict[str, int]:
     head = data[: data.find(b"end_header")].decode("ascii", "replace")
     counts = {}
     for line in head.splitlines():
         parts = line.split()
         if len(parts) == 3 and parts[0] == "element":
-            counts[parts[1]] = int(parts[2])
+            try:
+                counts[parts[1]] = int(parts[2])
+            except ValueError:
+                raise InputError(
+                    f"{path}: PLY header: element {parts[1]!r} has count {parts[2]!r}, "
+                    "not a whole number"
+                ) from None
     return counts
 
 
@@ -824,7 +830,7 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
         raise InputError(f"{path}: unsupported mesh format '.{ext}' (use OFF, OBJ, PLY or STL)")
     if ext == "ply":
         V, F, attrs = _ply_parts(_read_ply(data, path), path)
-        counts = _ply_header_counts(data)
+        counts = _ply_header_counts(data, path)
         if counts.get("vertex", len(V)) != len(V) or counts.get("face", 0) > attrs.n_faces:
             raise InputError(
                 f"{path}: truncated: header promises {counts.get('vertex')} vertices and "
