@@ -181,3 +181,32 @@ def test_ply_header_count_not_a_whole_number(tmp_path):
                  "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
     with pytest.raises(InputError, match=r"h.ply: "):
         load_mesh(p)
+
+
+@pytest.mark.parametrize(("scale", "pattern"), [
+    (1e200, r"number range: g.off: coordinates reach 1e\+200, beyond the number range"),
+    (1e-200, r"number range: g.off: the mesh is only 1e-200 across, below the number range"),
+])
+def test_info_names_the_number_range(tmp_path, scale, pattern):
+    """info at 1e+-200: the range is named, nothing is called degenerate or a soup, and
+    angles/cotangents are those of the unscaled grid (they do not depend on units)."""
+    import json
+    import re
+
+    V, F = grid()
+    p = tmp_path / "g.off"
+    save_mesh(p, V * scale, F)
+    env = {**os.environ, "PYTHONWARNINGS": "error"}  # no overflow warning may escape
+    run = [sys.executable, "-m", "arapkit.cli", "info", str(p), "--json"]
+    proc = subprocess.run(run, capture_output=True, text=True, env=env, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    facts = json.loads(proc.stdout)
+    assert any(re.search(pattern, a) for a in facts["advice"]), facts["advice"]
+    assert not any("soup" in a for a in facts["advice"])
+    save_mesh(tmp_path / "unit.off", V, F)
+    unit = json.loads(subprocess.run(
+        [sys.executable, "-m", "arapkit.cli", "info", str(tmp_path / "unit.off"), "--json"],
+        capture_output=True, text=True, env=env, timeout=300).stdout)
+    for key in ("faces", "needle_faces", "negative_cotan_weights", "coincident_vertices",
+                "degenerate_faces_dropped"):
+        assert facts[key] == unit[key], key

@@ -45,7 +45,7 @@ def test_weld_map_by_hand():
     assert weld_values(w, np.array([1, 2, 3, 5, 1, 1])).tolist() == [1, 5, 3, 1]
 
 
-@pytest.mark.parametrize("scale", [1e-150, 1e-3, 1.0, 1e150])
+@pytest.mark.parametrize("scale", [1e-200, 1e-150, 1e-3, 1.0, 1e150, 1e200])
 def test_tolerance_is_relative_to_the_diagonal(scale):
     soup = square_soup(scale)
     V = np.array(soup.vertices)

@@ -20,7 +20,14 @@ from scipy.sparse.csgraph import connected_components
 from .attributes import MeshAttributes
 from .errors import InputError
 
-__all__ = ["COORDINATE_RANGE", "Mesh", "check_number_range", "load_mesh", "weld"]
+__all__ = [
+    "COORDINATE_RANGE",
+    "Mesh",
+    "check_number_range",
+    "load_mesh",
+    "scale_free_vertices",
+    "weld",
+]
 
 #: Coordinates (and the mesh's extent) inside ``[1/COORDINATE_RANGE, COORDINATE_RANGE]``
 #: keep every squared length and area of the solver a normal double.
@@ -69,6 +76,20 @@ def _extent(V: np.ndarray) -> np.ndarray:
         return np.zeros(3)
     hi, lo = V.max(axis=0), V.min(axis=0)
     return 2.0 * (0.5 * hi - 0.5 * lo)
+
+
+def scale_free_vertices(vertices: np.ndarray) -> np.ndarray:
+    """The vertices moved and rescaled by powers of two to about unit size.
+
+    Angles, cotangents and relative tolerances are the same as the input's, and no
+    squared quantity over- or underflows, whatever the input's units.
+
+    Examples
+    --------
+    >>> scale_free_vertices(np.array([[0.0, 0, 0], [3e200, 0, 0]])).tolist()
+    [[0.0, 0.0, 0.0], [0.9798151324726952, 0.0, 0.0]]
+    """
+    return _normalised(np.asarray(vertices, dtype=np.float64))[0]
 
 
 def _normalised(V: np.ndarray) -> tuple[np.ndarray, float]:

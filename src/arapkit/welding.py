@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .errors import InputError
-from .mesh import Mesh
+from .mesh import Mesh, scale_free_vertices
 
 __all__ = ["WELD_TOL", "WeldMap", "soup_facts", "to_source", "weld", "weld_frame",
            "weld_handle_set", "weld_handles", "weld_values"]
@@ -87,6 +87,14 @@ def _clusters(V: np.ndarray, dist: float) -> np.ndarray:
     return rank[lab]
 
 
+def _relative_clusters(V: np.ndarray, tol: float) -> np.ndarray:
+    """:func:`_clusters` with a distance of ``tol`` times the bounding-box diagonal,
+    found on coordinates rescaled to unit size (distances of a mesh at 1e200 or 1e-200
+    would over- or underflow in the k-d tree)."""
+    W = scale_free_vertices(V)
+    return _clusters(W, tol * float(np.linalg.norm(np.ptp(W, axis=0))))
+
+
 def weld(mesh: Mesh, tol: float | None = None) -> Mesh:
     """Merge vertices of ``mesh`` closer than ``tol`` times its bounding-box diagonal.
 
@@ -116,7 +124,7 @@ def weld(mesh: Mesh, tol: float | None = None) -> Mesh:
     if not np.isfinite(tol) or tol < 0:
         raise InputError(f"{mesh.name}: weld tolerance must be a number >= 0, got {tol}")
     dist = tol * mesh.bounding_box_diagonal
-    lab = _clusters(np.asarray(mesh.vertices), dist)
+    lab = _relative_clusters(mesh.vertices, tol)
     n_w = int(lab.max()) + 1
     first = np.full(n_w, len(lab), dtype=np.int64)
     np.minimum.at(first, lab, np.arange(len(lab)))
@@ -287,7 +295,7 @@ def soup_facts(mesh: Mesh) -> dict[str, int]:
     {'triangle_components': 1, 'coincident_vertices': 0}
     """
     sizes = np.bincount(mesh.component_labels)
-    lab = _clusters(np.asarray(mesh.vertices), WELD_TOL * mesh.bounding_box_diagonal)
+    lab = _relative_clusters(mesh.vertices, WELD_TOL)
     return {
         "triangle_components": int(np.count_nonzero(sizes == 3)),
         "coincident_vertices": int(mesh.n_vertices - (lab.max() + 1)),

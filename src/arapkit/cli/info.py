@@ -71,14 +71,24 @@ def inspect_mesh(mesh) -> dict[str, Any]:
     >>> facts["components"], facts["boundary_loops"]
     (1, 0)
     """
+    from arapkit.errors import InputError
+    from arapkit.mesh import Mesh, check_number_range, scale_free_vertices
     from arapkit.weights import cotangent_weights
     from arapkit.welding import soup_facts
 
     loops = mesh.boundary_loops
     labels = mesh.component_labels
     comp_sizes = np.bincount(labels, minlength=mesh.n_components)
-    needles = int(np.count_nonzero(_min_angles_deg(mesh.vertices, mesh.faces) < NEEDLE_DEGREES))
-    w = cotangent_weights(mesh)
+    try:
+        check_number_range(mesh.vertices, mesh.name)
+        number_range, shape = None, mesh
+    except InputError as exc:
+        # angles and cotangents do not depend on the scale: measure them on a copy
+        # rescaled to unit size, which cannot overflow
+        number_range = str(exc)
+        shape = Mesh(scale_free_vertices(mesh.vertices), mesh.faces, name=mesh.name)
+    needles = int(np.count_nonzero(_min_angles_deg(shape.vertices, shape.faces) < NEEDLE_DEGREES))
+    w = cotangent_weights(shape)
     negative = int(np.count_nonzero(w < 0))
     facts: dict[str, Any] = {
         "file": mesh.name,
@@ -97,6 +107,7 @@ def inspect_mesh(mesh) -> dict[str, Any]:
         **soup_facts(mesh),
         "bounding_box_diagonal": mesh.bounding_box_diagonal,
         "repairs_on_load": list(mesh.notes),
+        "number_range": number_range,
     }
     facts["advice"] = _advice(facts)
     return facts
@@ -106,6 +117,8 @@ def _advice(f: dict[str, Any]) -> list[str]:
     out = []
     for note in f["repairs_on_load"]:
         out.append(f"on load: {note}")
+    if f.get("number_range"):
+        out.append(f"number range: {f['number_range']}")
     soup = f["triangle_components"] >= SOUP_TRIANGLES or (
         f["coincident_vertices"] >= max(SOUP_COINCIDENT, f["vertices"] // 100))
     if soup:
@@ -159,7 +172,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     width = max(len(k) for k in facts)
     for key, value in facts.items():
-        if key in ("advice", "repairs_on_load"):
+        if key in ("advice", "repairs_on_load", "number_range"):
             continue
         if isinstance(value, float):
             value = f"{value:.6g}"
