@@ -210,3 +210,15 @@ def test_info_names_the_number_range(tmp_path, scale, pattern):
     for key in ("faces", "needle_faces", "negative_cotan_weights", "coincident_vertices",
                 "degenerate_faces_dropped"):
         assert facts[key] == unit[key], key
+
+
+@pytest.mark.parametrize("scale", [1e-30, 1.0, 1e30])
+def test_stl_welding_does_not_depend_on_scale(tmp_path, scale):
+    """STL corners are welded on load; at 1e-30 an absolute rounding merged everything."""
+    V, F = grid()
+    F = F[:-1]  # without the collinear face
+    p = tmp_path / "g.stl"
+    save_mesh(p, V * scale, F)
+    m = load_mesh(p)
+    assert (m.n_vertices, m.n_faces) == (len(V), len(F))
+    assert m.n_components == 1

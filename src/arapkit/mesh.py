@@ -861,8 +861,12 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     m = _load_with_trimesh(data, ext, path)
     # STL stores every triangle with its own corners; without welding every triangle
     # would be a separate component.
-    V, inv = np.unique(np.round(np.asarray(m.vertices), 12), axis=0, return_inverse=True)
-    F = inv.reshape(-1, 3)
+    # Corners equal to 12 digits relative to the mesh's size are one vertex (an absolute
+    # rounding would merge a whole millimetre-scale part at 1e-13 m).
+    V = np.asarray(m.vertices, dtype=np.float64)
+    _, first, inv = np.unique(np.round(scale_free_vertices(V), 12), axis=0,
+                              return_index=True, return_inverse=True)
+    V, F = V[first], inv.reshape(-1, 3)
     mesh = _mesh_with_attributes(V, F, name, MeshAttributes("stl", np.full(len(F), 3), F.ravel()))
     mesh.notes.insert(0, "STL corners were welded into shared vertices")
     return mesh
