@@ -791,17 +791,16 @@ def _ply_parts(raw: dict, path: str) -> tuple[np.ndarray, np.ndarray | list, Mes
     lost = [f"PLY element '{e}'" for e in raw if e not in ("vertex", "face")]
     if key is None:
         raise InputError(f"{path}: no faces (PLY has no face element with vertex_indices)")
+    idx = fcols.pop(key)
+    if idx.dtype != object and idx.ndim == 2:
+        sizes = np.full(len(idx), idx.shape[1], dtype=np.int64)
+        corners = idx.astype(np.int64).ravel()
     else:
-        idx = fcols.pop(key)
-        if idx.dtype != object and idx.ndim == 2:
-            sizes = np.full(len(idx), idx.shape[1], dtype=np.int64)
-            corners = idx.astype(np.int64).ravel()
-        else:
-            polys = [np.asarray(p, dtype=np.int64) for p in idx]
-            sizes = np.array([len(p) for p in polys], dtype=np.int64)
-            corners = np.concatenate(polys) if polys else np.zeros(0, np.int64)
-        faces = corners.reshape(-1, 3) if np.all(sizes == 3) else np.split(
-            corners, np.cumsum(sizes)[:-1])
+        polys = [np.asarray(p, dtype=np.int64) for p in idx]
+        sizes = np.array([len(p) for p in polys], dtype=np.int64)
+        corners = np.concatenate(polys) if polys else np.zeros(0, np.int64)
+    faces = (corners.reshape(-1, 3) if np.all(sizes == 3)
+             else np.split(corners, np.cumsum(sizes)[:-1]))
     vprops = {k: v for k, v in vcols.items() if v.ndim == 1 and v.dtype != object}
     fprops = {k: v for k, v in fcols.items() if v.ndim == 1 and v.dtype != object}
     lost += [f"PLY list property '{k}'" for k in vcols if k not in vprops]
