@@ -73,7 +73,7 @@ __all__ = [
 
 #: Keys a job object may have (``mesh``, ``handles`` and ``output`` are required).
 JOB_KEYS = ("mesh", "handles", "transform", "rings", "rings_file", "weights", "energy",
-            "sr_alpha", "nodes", "tol", "max_iter", "init", "accelerate", "output")
+            "sr_alpha", "nodes", "weld", "tol", "max_iter", "init", "accelerate", "output")
 #: Columns of ``summary.csv``, in order.
 SUMMARY_COLUMNS = ("output", "status", "error", "iterations", "energy", "seconds", "worker")
 INSTALL_HINT = "arapkit batch needs dask and distributed: pip install 'arapkit[batch]'"
@@ -81,7 +81,7 @@ _INITS = ("identity", "laplacian")
 _DEFAULTS: dict[str, Any] = {"transform": None, "rings": 1, "rings_file": None,
                              "weights": DEFAULT_WEIGHTS, "energy": DEFAULT_ENERGY, "tol": 1e-3,
                              "max_iter": 1000, "init": "identity", "accelerate": False,
-                             "sr_alpha": None, "nodes": None}
+                             "sr_alpha": None, "nodes": None, "weld": None}
 
 
 def require_dask() -> None:
@@ -181,6 +181,17 @@ rings, rings_file, weights, energy, tol, max_iter, init, accelerate, output)
         check_method(job["energy"], job["sr_alpha"], job["nodes"])
     except InputError as e:
         raise InputError(f"{where}: {e}") from None
+    if job["weld"] is False:
+        job["weld"] = None
+    if job["weld"] is not None:
+        if job["weld"] is True:
+            from .welding import WELD_TOL
+
+            job["weld"] = WELD_TOL
+        if not _is_number(job["weld"]) or not 0 <= job["weld"] < 1:
+            raise InputError(f"{where}: 'weld' must be true or a tolerance in [0, 1) (relative "
+                             f"to the bounding-box diagonal), got {json.dumps(job['weld'])}")
+        job["weld"] = float(job["weld"])
     if not _is_number(job["tol"]) or job["tol"] <= 0:
         raise InputError(f"{where}: 'tol' must be a positive number, got {json.dumps(job['tol'])}")
     job["tol"] = float(job["tol"])
@@ -407,13 +418,14 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
         prepared = prepare_job(spec)
         res = prepared.solve()
         output.parent.mkdir(parents=True, exist_ok=True)
-        save_result(output, prepared, res)
+        warnings = save_result(output, prepared, res)
         wall = time.perf_counter() - t0
         report = job_report(spec, prepared, res, wall,
                             command=_deform_command(job, str(output)),
                             outputs={"mesh": str(output), "report": str(report_path(output))})
         report["batch"] = {"job": job, "job_hash": digest, "worker": worker,
-                           "numba_threads": threads, "notes": prepared.notes}
+                           "numba_threads": threads, "notes": prepared.notes,
+                           "warnings": warnings}
         write_json(report_path(output), report)
         return _row(job, "ok", "", res.iterations, float(res.energy), wall, worker)
     except Exception as e:  # one bad job must not stop the others

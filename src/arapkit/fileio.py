@@ -15,6 +15,7 @@ Examples
 >>> d = pathlib.Path(tempfile.mkdtemp())
 >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]); F = np.array([[0, 1, 2]])
 >>> save_mesh(d / "t.ply", V, F, vertex_properties={"rings": np.array([1, 2, 3])})
+[]
 >>> read_ply_vertex_properties(d / "t.ply")["rings"].tolist()
 [1, 2, 3]
 """
@@ -302,34 +303,73 @@ def _trimesh_bytes(vertices: np.ndarray, faces: np.ndarray, fmt: str) -> bytes:
 def save_mesh(
     path: str | os.PathLike,
     vertices: np.ndarray,
-    faces: np.ndarray,
+    faces: np.ndarray | None = None,
     vertex_properties: Mapping[str, np.ndarray] | None = None,
-) -> None:
-    """Write a triangle mesh atomically, in the format named by the extension.
+    *,
+    like: Any = None,
+) -> list[str]:
+    """Write a mesh atomically, in the format named by the extension.
 
     Parameters
     ----------
     path : path
         ``.ply``, ``.obj``, ``.off``, ``.stl`` or ``.glb``, optionally followed by ``.gz``.
     vertices : (n, 3) float
-    faces : (m, 3) int
+    faces : (m, 3) int, optional
+        Triangles; not needed (and not used) when ``like`` is given.
     vertex_properties : dict of name -> (n,) array, optional
         Extra per-vertex values (``energy``, ``rings`` ...). Only PLY stores them; other
-        formats silently drop them because they have no place for them.
+        formats drop them because they have no place for them.
+    like : Mesh, optional
+        The mesh ``vertices`` belong to (the loaded input, or a mesh made by
+        :func:`arapkit.welding.weld`, whose values are then written to the input's own
+        vertices). Everything its file carried is written again: the original polygons
+        (also faces dropped as degenerate), UVs with their seams, normals recomputed
+        from ``vertices``, OBJ materials and groups, colours, PLY properties. See
+        ``docs/io.md`` for what each format keeps.
+
+    Returns
+    -------
+    list of str
+        One warning line per kind of data the output format cannot carry (empty when
+        nothing was lost). The CLI prints them on stderr.
 
     Examples
     --------
     >>> import tempfile, pathlib, numpy as np
     >>> p = pathlib.Path(tempfile.mkdtemp()) / "t.off"
     >>> save_mesh(p, np.eye(3), np.array([[0, 1, 2]]))
+    []
     >>> p.read_text().splitlines()[0]
     'OFF'
     """
     fmt, gz = mesh_format(path)
     V = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    props = dict(vertex_properties or {})
+    warnings: list[str] = []
+    attrs = None
+    if like is not None:
+        wf = getattr(like, "welded_from", None)
+        if wf is not None:
+            if len(V) != like.n_vertices:
+                raise ValueError(f"{len(V)} vertices for a welded mesh of {like.n_vertices}")
+            V = V[wf.index]
+            props = {k: np.asarray(v)[wf.index] for k, v in props.items()}
+            like = wf.source
+        if len(V) != like.n_vertices:
+            raise ValueError(f"{len(V)} vertices for a mesh of {like.n_vertices}")
+        attrs = getattr(like, "attributes", None)
+        if faces is None or attrs is not None:
+            faces = like.faces
+    if faces is None:
+        raise TypeError("save_mesh needs faces or like=mesh")
     F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
-    if fmt == "ply":
-        data = _ply_bytes(V, F, dict(vertex_properties or {}))
+    if attrs is not None:
+        from arapkit.meshwriters import write_with_attributes
+
+        data, warnings = write_with_attributes(fmt, V, attrs, props, _trimesh_bytes)
+    elif fmt == "ply":
+        data = _ply_bytes(V, F, props)
     elif fmt in ("off", "obj"):
         data = _text_bytes(V, F, fmt)
     else:
@@ -338,6 +378,7 @@ def save_mesh(
         # mtime=0: identical meshes give identical files
         data = gzip.compress(data, mtime=0)
     atomic_write(path, data)
+    return [f"{Path(path).name}: {w}" for w in warnings]
 
 
 def read_ply_vertex_properties(path: str | os.PathLike) -> dict[str, np.ndarray]:
@@ -352,6 +393,7 @@ def read_ply_vertex_properties(path: str | os.PathLike) -> dict[str, np.ndarray]
     >>> import tempfile, pathlib, numpy as np
     >>> p = pathlib.Path(tempfile.mkdtemp()) / "t.ply"
     >>> save_mesh(p, np.eye(3), np.array([[0, 1, 2]]), {"energy": np.array([0.5, 1, 2])})
+    []
     >>> read_ply_vertex_properties(p)["energy"].tolist()
     [0.5, 1.0, 2.0]
     """

@@ -19,7 +19,8 @@ Examples
 >>> job = DeformJob(mesh=str(d / "bar.off"), handles=str(d / "h.json"), rings=2)
 >>> prepared = prepare_job(job)
 >>> res = prepared.solve()
->>> save_result(d / "out.ply", prepared, res)
+>>> save_result(d / "out.ply", prepared, res)   # warnings: none for PLY
+[]
 >>> bool(res.converged), job_report(job, prepared, res, 0.0)["result"]["iterations"] > 0
 (True, True)
 """
@@ -67,6 +68,10 @@ class DeformJob:
         One of :data:`ENERGIES`.
     sr_alpha, nodes : optional
         Options of ``energy="sr-arap"`` and ``energy="embedded"``.
+    weld : float or None
+        Merge vertices closer than this fraction of the bounding-box diagonal for the solve
+        (:func:`arapkit.welding.weld`); handles, rings and the output refer to the input's
+        own vertices.
     """
 
     mesh: str
@@ -82,6 +87,7 @@ class DeformJob:
     energy: str = DEFAULT_ENERGY
     sr_alpha: float | None = None
     nodes: int | None = None
+    weld: float | None = None
 
     def input_files(self) -> list[str]:
         """The files this job reads."""
@@ -153,15 +159,30 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
             # Advice keeps its interface wording through the prefix
             note(msg.after(f"{job.mesh}: ") if isinstance(msg, Advice) else f"{job.mesh}: {msg}")
 
-    mesh = load_mesh_checked(job.mesh)
-    for msg in mesh.notes:
+    source = load_mesh_checked(job.mesh)
+    if job.weld is None:
+        mesh = source
+    else:
+        from .welding import weld
+
+        mesh = weld(source, job.weld)
+    for msg in mesh.notes if mesh is source else source.notes + mesh.notes:
         tell(msg)
     extra = {"energy": job.energy, "sr_alpha": job.sr_alpha, "nodes": job.nodes}
-    hs = _load_handles(job, mesh.vertices)
+    # handles and a rings map refer to the input's vertices: map them onto a welded mesh
+    hs = _load_handles(job, source.vertices)
+    if mesh is not source:
+        from .welding import weld_handle_set
+
+        hs = weld_handle_set(mesh, hs)
     if job.rings_file:
         from .handles import load_rings
 
-        rings: np.ndarray | int = load_rings(job.rings_file, mesh.n_vertices)
+        rings: np.ndarray | int = load_rings(job.rings_file, source.n_vertices)
+        if mesh is not source:
+            from .welding import weld_values
+
+            rings = weld_values(mesh, np.asarray(rings))
     else:
         rings = int(job.rings)
     deformer = Deformer(
@@ -180,15 +201,21 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
     return PreparedJob(job, mesh, hs, deformer, notes)
 
 
-def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> None:
-    """Write the deformed mesh (atomically), with per-vertex energy and rings for PLY."""
+def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[str]:
+    """Write the deformed mesh (atomically), with per-vertex energy and rings for PLY.
+
+    Everything the input file carried (polygons, UVs, normals, materials, colours, PLY
+    properties) comes out again, and a welded solve is written to the input's own
+    vertices. Returns warning lines for what the output format cannot carry.
+    """
     from .fileio import save_mesh
 
-    save_mesh(
+    return save_mesh(
         output,
         res.vertices,
-        prepared.mesh.faces,
-        {"energy": res.vertex_energy, "rings": prepared.rings.astype(np.int32)},
+        vertex_properties={"energy": res.vertex_energy,
+                           "rings": prepared.rings.astype(np.int32)},
+        like=prepared.mesh,
     )
 
 
@@ -234,6 +261,11 @@ def job_report(
             "handles": job.handles,
             "transform": job.transform,
             "rings_file": job.rings_file,
+            "weld": None if mesh.welded_from is None else {
+                "tol": mesh.welded_from.tol,
+                "input_vertices": mesh.welded_from.source.n_vertices,
+                "welded_vertices": mesh.n_vertices,
+            },
         },
         "method": method_description(job),
         "parameters": {

@@ -14,7 +14,9 @@ from arapkit.errors import InputError
 
 __all__ = [
     "Progress",
+    "add_weld_option",
     "load_mesh_checked",
+    "maybe_weld",
     "note",
     "positive_float",
     "positive_int",
@@ -71,10 +73,59 @@ def load_mesh_checked(path: str):
         raise InputError(f"{path}: cannot read mesh ({type(e).__name__}: {e})") from None
 
 
+def weld_tolerance(text: str) -> float:
+    """argparse type: a finite number >= 0 (the weld distance relative to the diagonal).
+
+    Examples
+    --------
+    >>> weld_tolerance("1e-6")
+    1e-06
+    """
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
+    if not math.isfinite(value) or value < 0 or value >= 1:
+        raise argparse.ArgumentTypeError(f"must be a number in [0, 1), got {text}")
+    return value
+
+
+def add_weld_option(p: argparse.ArgumentParser) -> None:
+    """``--weld [TOL]``: merge coincident vertices for the solve (see :mod:`arapkit.welding`)."""
+    from arapkit.welding import WELD_TOL
+
+    p.add_argument(
+        "--weld",
+        nargs="?",
+        const=WELD_TOL,
+        default=None,
+        type=weld_tolerance,
+        metavar="TOL",
+        help="merge vertices closer than TOL times the bounding-box diagonal "
+        f"(default {WELD_TOL:g}) for the solve, for triangle soups and split-vertex files; "
+        "results are written to the input's own vertices (put it after MESH, or write "
+        "--weld=TOL)",
+    )
+
+
+def maybe_weld(mesh, tol: float | None):
+    """``mesh`` welded with ``tol`` (relative), or ``mesh`` itself when ``tol`` is None."""
+    if tol is None:
+        return mesh
+    from arapkit.welding import weld
+
+    return weld(mesh, tol)
+
+
 def note(message: str, quiet: bool) -> None:
     """Informational line on stderr (stdout is reserved for results)."""
     if not quiet:
         print(f"arapkit: {message}", file=sys.stderr)
+
+
+def warn(message: str) -> None:
+    """Warning line on stderr, shown even with --quiet (something was not written)."""
+    print(f"arapkit: warning: {message}", file=sys.stderr)
 
 
 class Progress:

@@ -20,9 +20,11 @@ import numpy as np
 from arapkit.cli.common import (
     Progress,
     add_example_epilog,
+    add_weld_option,
     note,
     positive_float,
     positive_int,
+    warn,
 )
 from arapkit.errors import InputError, worded_for
 from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
@@ -138,6 +140,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="JSON report (parameters, timings, energy history); '-' for stdout",
     )
     p.add_argument("--figure", metavar="FILE", help="summary figure (.png, .pdf, .svg or .jpg)")
+    add_weld_option(p)
     p.add_argument("--force", action="store_true", help="allow overwriting an input file")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar or notes")
     return p
@@ -191,6 +194,7 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
         max_iter=args.max_iter,
         init=args.init,
         accelerate=args.accelerate,
+        weld=getattr(args, "weld", None),
         **method,
     )
 
@@ -217,7 +221,8 @@ def run(args: argparse.Namespace) -> int:
     wall = time.perf_counter() - t0
 
     r_full = prepared.rings
-    save_result(args.output, prepared, res)
+    for line in save_result(args.output, prepared, res):
+        warn(line)
     report = job_report(
         job,
         prepared,
@@ -282,7 +287,10 @@ def _describe_rings(r: np.ndarray) -> str:
 def _print_summary(args, mesh, hs, res, wall: float) -> None:
     lines = [
         f"output: {args.output}",
-        f"vertices: {mesh.n_vertices}",
+        f"vertices: {mesh.n_vertices}"
+        + ("" if mesh.welded_from is None else
+           f" (welded from the input's {mesh.welded_from.source.n_vertices}; the output "
+           "has the input's vertices)"),
         f"faces: {mesh.n_faces}",
         f"handles: {len(hs.indices)} in {len(hs.groups)} group(s)",
         f"method: {args.energy}",

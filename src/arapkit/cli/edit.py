@@ -46,6 +46,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="uniform r when no rings file is given (default 1)",
     )
     p.add_argument("--handles", metavar="H", help="handle file (JSON, or .sel with .def)")
+    from arapkit.cli.common import add_weld_option
+
+    add_weld_option(p)
     p.add_argument(
         "--session", metavar="S", help="editor session JSON to resume (names its own mesh)"
     )
@@ -95,17 +98,33 @@ def build_state(args: argparse.Namespace) -> Any:
             raise InputError("give either MESH or --session (the session names its mesh)")
         st = EditorState.from_session(args.session)
     elif args.mesh:
-        st = EditorState(load_mesh(args.mesh), mesh_path=str(Path(args.mesh).resolve()))
+        from arapkit.cli.common import maybe_weld
+
+        mesh = maybe_weld(load_mesh(args.mesh), getattr(args, "weld", None))
+        st = EditorState(mesh, mesh_path=str(Path(args.mesh).resolve()))
     else:
         st = _bar_state()
     if args.rings < 1:
         raise InputError(f"--rings: r must be >= 1, got {args.rings}")
     if not args.session and args.rings != 1:
         st.rings = st._check_rings(args.rings)
+    # files given on the command line index the input's vertices, also when welded
+    welded = getattr(st.mesh, "welded_from", None)
+    source = welded.source if welded is not None else st.mesh
     if args.rings_file:
-        st.rings = load_rings(args.rings_file, st.n)
+        rings = load_rings(args.rings_file, source.n_vertices)
+        if welded is not None:
+            from arapkit.welding import weld_values
+
+            rings = weld_values(st.mesh, rings)
+        st.rings = st._check_rings(rings)
     if args.handles:
-        st.add_handle_set(load_handles(args.handles, st.mesh.vertices), record=False)
+        hs = load_handles(args.handles, source.vertices)
+        if welded is not None:
+            from arapkit.welding import weld_handle_set
+
+            hs = weld_handle_set(st.mesh, hs)
+        st.add_handle_set(hs, record=False)
     st._undo.clear()  # start-up choices are not undoable edits
     return st
 

@@ -22,6 +22,10 @@ __all__ = ["add_parser", "inspect_mesh", "run"]
 
 #: Triangles with a corner angle below this (degrees) count as near-degenerate.
 NEEDLE_DEGREES = 1.0
+#: ``info`` calls a mesh a soup from this many single-triangle components ...
+SOUP_TRIANGLES = 1000
+#: ... or this many coincident vertices (and at least 1 % of all vertices).
+SOUP_COINCIDENT = 10
 
 
 def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParser:
@@ -67,13 +71,24 @@ def inspect_mesh(mesh) -> dict[str, Any]:
     >>> facts["components"], facts["boundary_loops"]
     (1, 0)
     """
+    from arapkit.errors import InputError
+    from arapkit.mesh import Mesh, check_number_range, scale_free_vertices
     from arapkit.weights import cotangent_weights
+    from arapkit.welding import soup_facts
 
     loops = mesh.boundary_loops
     labels = mesh.component_labels
     comp_sizes = np.bincount(labels, minlength=mesh.n_components)
-    needles = int(np.count_nonzero(_min_angles_deg(mesh.vertices, mesh.faces) < NEEDLE_DEGREES))
-    w = cotangent_weights(mesh)
+    try:
+        check_number_range(mesh.vertices, mesh.name)
+        number_range, shape = None, mesh
+    except InputError as exc:
+        # angles and cotangents do not depend on the scale: measure them on a copy
+        # rescaled to unit size, which cannot overflow
+        number_range = str(exc)
+        shape = Mesh(scale_free_vertices(mesh.vertices), mesh.faces, name=mesh.name)
+    needles = int(np.count_nonzero(_min_angles_deg(shape.vertices, shape.faces) < NEEDLE_DEGREES))
+    w = cotangent_weights(shape)
     negative = int(np.count_nonzero(w < 0))
     facts: dict[str, Any] = {
         "file": mesh.name,
@@ -89,8 +104,10 @@ def inspect_mesh(mesh) -> dict[str, Any]:
         "degenerate_faces_dropped": sum(mesh.dropped_faces.values()),
         "needle_faces": needles,
         "negative_cotan_weights": negative,
+        **soup_facts(mesh),
         "bounding_box_diagonal": mesh.bounding_box_diagonal,
         "repairs_on_load": list(mesh.notes),
+        "number_range": number_range,
     }
     facts["advice"] = _advice(facts)
     return facts
@@ -100,6 +117,17 @@ def _advice(f: dict[str, Any]) -> list[str]:
     out = []
     for note in f["repairs_on_load"]:
         out.append(f"on load: {note}")
+    if f.get("number_range"):
+        out.append(f"number range: {f['number_range']}")
+    soup = f["triangle_components"] >= SOUP_TRIANGLES or (
+        f["coincident_vertices"] >= max(SOUP_COINCIDENT, f["vertices"] // 100))
+    if soup:
+        out.append(
+            f"looks like a triangle soup or an unwelded file ({f['triangle_components']} "
+            f"single-triangle components, {f['coincident_vertices']} coincident vertices): "
+            "use --weld to merge coincident vertices for the solve (the output keeps the "
+            "input's vertices)"
+        )
     if f["components"] > 1:
         out.append(
             f"{f['components']} connected components: each component without a handle is "
@@ -143,7 +171,7 @@ def run(args: argparse.Namespace) -> int:
         return 0
     width = max(len(k) for k in facts)
     for key, value in facts.items():
-        if key in ("advice", "repairs_on_load"):
+        if key in ("advice", "repairs_on_load", "number_range"):
             continue
         if isinstance(value, float):
             value = f"{value:.6g}"

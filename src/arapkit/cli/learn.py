@@ -31,7 +31,12 @@ import warnings
 
 import numpy as np
 
-from arapkit.cli.common import add_example_epilog, load_mesh_checked, positive_int
+from arapkit.cli.common import (
+    add_example_epilog,
+    add_weld_option,
+    load_mesh_checked,
+    positive_int,
+)
 from arapkit.errors import InputError
 from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
@@ -107,6 +112,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    help="compute each sequence's energy table as a task on this Dask cluster "
                    "(tcp://HOST:PORT; needs pip install 'arapkit[batch]')")
     p.add_argument("--force", action="store_true", help="allow overwriting an input file")
+    add_weld_option(p)
     p.add_argument("--quiet", "-q", action="store_true", help="no notes on stderr")
     return p
 
@@ -307,6 +313,10 @@ def _learn_sequences(args, frames: Frames, ref: int, reference):
     from arapkit.learn import learn_rings_sequences
 
     seqs = [[frames.vertices[i] for i in seq if i != ref] for seq in frames.sequences]
+    if getattr(reference, "welded_from", None) is not None:
+        from arapkit.welding import weld_frame
+
+        seqs = [[weld_frame(reference, p) for p in seq] for seq in seqs]
     if not args.scheduler:
         return learn_rings_sequences(reference, seqs, args.r_min, args.r_max, args.omega,
                                      args.weights)
@@ -337,14 +347,20 @@ def _learn(args, frames: Frames, ref: int):
     else:
         reference = Mesh(frames.vertices[ref], frames.faces, name=frames.names[ref])
     others = [i for i in range(len(frames)) if i != ref]
+    poses = [frames.vertices[i] for i in others]
+    if getattr(args, "weld", None) is not None:
+        from arapkit.welding import weld, weld_frame
+
+        # every frame shares the reference's vertices, so one weld map serves them all
+        reference = weld(reference, args.weld)
+        poses = [weld_frame(reference, p) for p in poses]
     with warnings.catch_warnings():
         # identical frames are reported below by file name instead
         warnings.simplefilter("ignore", UserWarning)
         if len(frames.sequences) > 1 or args.scheduler:
             res = _learn_sequences(args, frames, ref, reference)
         else:
-            res = learn_rings(reference, [frames.vertices[i] for i in others], args.r_min,
-                              args.r_max, args.omega, args.weights)
+            res = learn_rings(reference, poses, args.r_min, args.r_max, args.omega, args.weights)
     # warnings are shown even with --quiet: they say the result may be meaningless
     for j in res.identical:
         _warn(f"{frames.names[others[j]]} is identical to the reference: it carries no "
@@ -356,22 +372,26 @@ def _learn(args, frames: Frames, ref: int):
 
 def _write(args, reference, res) -> None:
     from arapkit.handles import save_rings
+    from arapkit.welding import to_source
 
-    save_rings(args.output, res.rings)
+    # a welded reference: the map is written for the input's own vertices
+    save_rings(args.output, to_source(reference, res.rings))
     if args.ply:
         from arapkit.fileio import save_mesh
 
-        save_mesh(args.ply, reference.vertices, reference.faces,
-                  vertex_properties={"rings": res.rings.astype(np.int32)})
+        for line in save_mesh(args.ply, reference.vertices, like=reference,
+                              vertex_properties={"rings": res.rings.astype(np.int32)}):
+            _warn(line)
     if args.energies:
         from arapkit.fileio import atomic_open
 
+        energies = to_source(reference, res.energies)
         with atomic_open(args.energies, "wb") as f:
             if args.energies.lower().endswith(".npy"):
-                np.save(f, res.energies)
+                np.save(f, energies)
             else:
                 cols = " ".join(f"r{r}" for r in range(res.r_min, res.r_max + 1))
-                np.savetxt(f, res.energies, fmt="%.9g", header=f"E_ARAP(k, r): {cols}")
+                np.savetxt(f, energies, fmt="%.9g", header=f"E_ARAP(k, r): {cols}")
     if args.figure:
         from arapkit.learn import rings_figure
         from arapkit.plots import save_figure

@@ -836,12 +836,16 @@ class EditorApp:
             stem = safe_stem(st.mesh.name)
             if st.mesh_path is None:
                 rest = out / f"{stem}-rest.ply"
-                save_mesh(rest, st.mesh.vertices, st.mesh.faces)
+                save_mesh(rest, st.mesh.vertices, like=st.mesh)
                 st.mesh_path = str(rest)
             return st.save_session(out / f"{stem}-session.json")
 
     def export(self) -> list[Path]:
-        """Write the deformed mesh (PLY with r and energy per vertex) and the rings file."""
+        """Write the deformed mesh (PLY with r and energy per vertex) and the rings file.
+
+        Everything the mesh's file carried comes along (``save_mesh(like=...)``); a mesh
+        loaded from OBJ is also exported as OBJ, which keeps its UVs and materials.
+        """
         from arapkit.fileio import save_mesh
         from arapkit.handles import save_rings
 
@@ -853,9 +857,19 @@ class EditorApp:
             if self._vertex_energy is not None:
                 props["energy"] = self._vertex_energy
             mesh_path, rings_path = out / f"{stem}-deformed.ply", out / f"{stem}-rings.txt"
-            save_mesh(mesh_path, st.vertices, st.mesh.faces, vertex_properties=props)
-            save_rings(rings_path, st.rings)
-            return [mesh_path, rings_path]
+            save_mesh(mesh_path, st.vertices, vertex_properties=props, like=st.mesh)
+            welded = getattr(st.mesh, "welded_from", None)
+            source = welded.source if welded is not None else st.mesh
+            # r per input vertex, like every file arapkit writes for a welded mesh
+            rings = st.rings if welded is None else st.rings[welded.index]
+            save_rings(rings_path, rings)
+            paths = [mesh_path, rings_path]
+            attrs = getattr(source, "attributes", None)
+            if attrs is not None and attrs.source_format == "obj":
+                obj_path = out / f"{stem}-deformed.obj"
+                save_mesh(obj_path, st.vertices, like=st.mesh)
+                paths.append(obj_path)
+            return paths
 
     def _save_session(self, event: Any) -> None:
         path = self.save_session()

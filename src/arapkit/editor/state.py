@@ -629,6 +629,9 @@ class EditorState:
             "targets": tgt.tolist(),
             "rings": self.rings.tolist(),
             "solver": self.settings.to_dict(),
+            # a session on a welded mesh indexes the welded vertices: reopening welds again
+            "weld": (None if getattr(self.mesh, "welded_from", None) is None
+                     else self.mesh.welded_from.tol),
         }
 
     def apply_dict(self, d: dict[str, Any], record: bool = True) -> None:
@@ -682,6 +685,11 @@ class EditorState:
         if not mesh_path:
             raise InputError(f"{path}: the session names no mesh file")
         mesh_file = Path(path).parent / mesh_path
-        st = cls(load_mesh(str(mesh_file)), mesh_path=str(mesh_file))
+        mesh = load_mesh(str(mesh_file))
+        if d.get("weld") is not None:
+            from arapkit.welding import weld
+
+            mesh = weld(mesh, d["weld"])
+        st = cls(mesh, mesh_path=str(mesh_file))
         st.apply_dict(d, record=False)
         return st
