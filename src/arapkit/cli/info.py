@@ -30,9 +30,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "info",
         help="describe a mesh and how the deformer would treat its problems",
         description="Print vertex/face counts, connected components, boundary loops, "
-        "degenerate and non-manifold elements of MESH, and what arapkit deform would do "
-        "about each.",
-        **add_example_epilog(["arapkit info cow.off", "arapkit info scan.ply.gz --json"]),
+        "degenerate and non-manifold elements of MESH, its bounding box and a guess of its up "
+        "axis (for writing handle files and reading figures), and what arapkit deform would "
+        "do about each problem.",
+        **add_example_epilog(
+            ["arapkit info examples/cactus.off", "arapkit info scan.ply.gz --json"]
+        ),
     )
     p.add_argument("mesh", metavar="MESH", help="mesh file (OFF, OBJ, PLY, STL; may be .gz)")
     p.add_argument("--json", action="store_true", help="print the facts as one JSON object")
@@ -67,8 +70,10 @@ def inspect_mesh(mesh) -> dict[str, Any]:
     >>> facts["components"], facts["boundary_loops"]
     (1, 0)
     """
+    from arapkit.orientation import bounding_box, guess_up
     from arapkit.weights import cotangent_weights
 
+    box, up = bounding_box(mesh.vertices), guess_up(mesh.vertices)
     loops = mesh.boundary_loops
     labels = mesh.component_labels
     comp_sizes = np.bincount(labels, minlength=mesh.n_components)
@@ -90,6 +95,12 @@ def inspect_mesh(mesh) -> dict[str, Any]:
         "needle_faces": needles,
         "negative_cotan_weights": negative,
         "bounding_box_diagonal": mesh.bounding_box_diagonal,
+        "bounding_box_min": box.min.tolist(),
+        "bounding_box_max": box.max.tolist(),
+        "extents": box.extents.tolist(),
+        "up_axis_guess": up.axis,
+        "up_axis_confidence": up.confidence,
+        "up_axis_reason": up.reason,
         "repairs_on_load": list(mesh.notes),
     }
     facts["advice"] = _advice(facts)
@@ -148,6 +159,8 @@ def run(args: argparse.Namespace) -> int:
             continue
         if isinstance(value, float):
             value = f"{value:.6g}"
+        elif isinstance(value, list) and all(isinstance(x, float) for x in value):
+            value = "[" + ", ".join(f"{x:.6g}" for x in value) + "]"
         print(f"{key.replace('_', ' ') + ':':<{width + 2}}{value}")
     print("what arapkit deform would do:")
     for line in facts["advice"]:
