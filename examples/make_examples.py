@@ -20,6 +20,7 @@ Examples
 ::
 
     python examples/make_examples.py          # rewrites the files above in examples/
+    python examples/make_examples.py /tmp/x   # writes them into /tmp/x instead
 """
 
 from __future__ import annotations
@@ -121,26 +122,30 @@ def finger_bend(V: np.ndarray, degrees: float) -> np.ndarray:
     return out
 
 
-def main() -> None:
+def main(out: Path = HERE) -> None:
+    """Write every generated example file into ``out``."""
+    out = Path(out)
     b = bar()
-    save_mesh(HERE / "bar.off", b.vertices, b.faces)
+    save_mesh(out / "bar.off", b.vertices, b.faces)
     x = b.vertices[:, 0]
     left = np.flatnonzero(x <= x.min() + 1e-9)
     right = np.flatnonzero(x >= x.max() - 1e-9)
-    save_sel(HERE / "bar.sel", b.n_vertices, left, right)
+    save_sel(out / "bar.sel", b.n_vertices, left, right)
     lift = np.eye(4)
     lift[:3, 3] = [-1.0, 0.0, 2.5]  # pull the right cap back and up: a hook
-    save_def(HERE / "bar.def", lift)
-    save_rings(HERE / "bar-rings.txt", bar_two_materials(b, soft=2, hard=6))
+    save_def(out / "bar.def", lift)
+    save_rings(out / "bar-rings.txt", bar_two_materials(b, soft=2, hard=6))
 
     Vf, Ff = finger()
-    save_mesh(HERE / "finger.off", Vf, Ff)
+    save_mesh(out / "finger.off", Vf, Ff)
     frames = np.stack([finger_bend(Vf, d) for d in (0, 15, 30, 45, 60, 75)])
-    np.savez_compressed(HERE / "finger-bend.npz", V=frames.astype(np.float32), F=Ff)
+    np.savez_compressed(out / "finger-bend.npz", V=frames.astype(np.float32), F=Ff)
 
     Vc, Fc = cactus()
-    save_mesh(HERE / "cactus.off", Vc, Fc)
+    save_mesh(out / "cactus.off", Vc, Fc)
 
 
 if __name__ == "__main__":
-    main()
+    import sys
+
+    main(Path(sys.argv[1]) if len(sys.argv) > 1 else HERE)
