@@ -39,7 +39,7 @@ import numpy as np  # noqa: E402
 from matplotlib.collections import PolyCollection  # noqa: E402
 from matplotlib.colors import BoundaryNorm, Colormap, ListedColormap, Normalize  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
+from matplotlib.ticker import FuncFormatter, MaxNLocator  # noqa: E402
 
 __all__ = [
     "DEFAULT_MAX_FACES",
@@ -301,7 +301,9 @@ def _colorbar(fig: Figure, ax, norm: Normalize, cmap, label: str) -> None:
         cb.set_ticklabels([f"{v + 0.5:g}" for v in norm.boundaries[:-1]])
     else:
         # few ticks: long labels such as 0.00025 would otherwise run into each other
+        # and no "1e-5" offset text, which lands on the label
         cb.locator = MaxNLocator(nbins=4)
+        cb.formatter = FuncFormatter(lambda v, _: f"{v:.3g}")
         cb.update_ticks()
     cb.set_label(label, fontsize=8)
     cb.ax.tick_params(labelsize=7)
@@ -596,7 +598,9 @@ def rings_figure(
     """
     levels = np.arange(r_min, r_max + 1)
     cmap, norm, _ = rings_colormap(levels, levels)
-    fig, axes = plt.subplots(1, len(views), figsize=(5.0 * len(views), 3.8), squeeze=False,
+    # at least 8 inches wide: the title (file name, counts, omega) must fit one view too
+    width = max(5.0 * len(views), 8.0)
+    fig, axes = plt.subplots(1, len(views), figsize=(width, 3.8), squeeze=False,
                              layout="constrained")
     values = np.asarray(rings, dtype=np.float64)
     for ax, view in zip(axes[0], views, strict=True):

@@ -42,10 +42,11 @@ from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 __all__ = ["Frames", "add_parser", "expand_frames", "load_frames", "parse_omega", "run"]
 
 EXAMPLES = [
-    "arapkit learn walk.npz -o rings.txt --figure rings.png",
+    "arapkit learn examples/finger-bend.npz -o rings.txt --figure rings.png",
     "arapkit learn 'poses/*.obj' -o rings.txt --ply rings.ply",
     "arapkit learn poses/ -o rings.txt --reference 2 --omega 0.3",
-    "arapkit deform rest.obj --handles h.json --rings-file rings.txt -o out.ply",
+    "arapkit deform examples/finger.off --handles examples/handles/rotate-limb.json "
+    "--rings-file rings.txt -o out.ply",
 ]
 _MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 _GLOB_CHARS = re.compile(r"[*?\[]")
