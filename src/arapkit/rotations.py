@@ -592,9 +592,6 @@ def fit_rotations(S: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
         raise InputError(f"fit_rotations: S must be numbers ({e})") from None
     if S.ndim != 3 or S.shape[1:] != (3, 3):
         raise InputError(f"fit_rotations: S must have shape (n, 3, 3), got {S.shape}")
-    if not np.all(np.isfinite(S)):
-        bad = int(np.argmax(~np.isfinite(S).all(axis=(1, 2))))
-        raise InputError(f"fit_rotations: S[{bad}] has a non-finite entry")
     if out is None:
         out = np.empty_like(S)
     elif out.shape != S.shape or out.dtype != np.float64 or not out.flags.c_contiguous:

@@ -1,6 +1,6 @@
 """Colour views of the editor: rigidity r (1 blue ... 6 red) and per-vertex energy.
 
-The colours are :mod:`arapkit.colors`', the same as in the figures.
+The colours come from :mod:`arapkit.colors`, the same as in the figures.
 
 viser meshes carry one colour each, so a coloured view is drawn as a few sub-meshes, one
 per colour bin, each with only the vertices its faces use.  During a drag only their
