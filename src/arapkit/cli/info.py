@@ -157,7 +157,9 @@ def run(args: argparse.Namespace) -> int:
     for key, value in facts.items():
         if key in ("advice", "repairs_on_load"):
             continue
-        if isinstance(value, float):
+        if key == "up_axis_confidence":
+            value = f"{value:.2f}  (0 = a coin toss, 1 = certain; see docs/figures.md)"
+        elif isinstance(value, float):
             value = f"{value:.6g}"
         elif isinstance(value, list) and all(isinstance(x, float) for x in value):
             value = "[" + ", ".join(f"{x:.6g}" for x in value) + "]"
