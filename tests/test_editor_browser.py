@@ -211,3 +211,75 @@ def test_browser_drag_deforms_mesh(tmp_path):
         assert st.can_undo
     finally:
         app.stop()
+
+
+# ------------------------------------------------------------------ up axis on load
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+
+
+def example_app(name: str, export_dir: Path, up: str | None = None) -> EditorApp:
+    ns = argparse.Namespace(mesh=str(EXAMPLES / name), rings_file=None, rings=1, handles=None,
+                            session=None)
+    return EditorApp(build_state(ns), port=free_port(), export_dir=export_dir, up=up)
+
+
+@pytest.mark.parametrize(("name", "up"), [("cactus.off", "+y"), ("finger.off", "+z")])
+def test_up_axis_guessed_on_load_and_shown(tmp_path, name, up):
+    app = example_app(name, tmp_path)
+    try:
+        assert app.dd_up.value == up
+        assert f"up **{up}** (guessed" in app.md_settings.content
+        assert "method **r-ring ARAP**" in app.md_settings.content
+        assert f"weights **{app.state.settings.weights}**" in app.md_settings.content
+        # the camera starts above the centre along +up, so the model is seen upright
+        u = np.array(dict(zip(("+x", "+y", "+z"), np.eye(3), strict=True))[up])
+        eye = np.asarray(app.server.initial_camera.position)
+        look = np.asarray(app.server.initial_camera.look_at)
+        assert (eye - look) @ u > 0
+        # switching to a y-up mesh from the page guesses again
+        app.open_mesh_bytes("cactus.off", (EXAMPLES / "cactus.off").read_bytes())
+        assert app.dd_up.value == "+y"
+    finally:
+        app.stop()
+
+
+def test_up_axis_override_holds(tmp_path):
+    app = example_app("cactus.off", tmp_path, up="-y")
+    try:
+        assert app.dd_up.value == "-y" and "set with --up" in app.md_settings.content
+    finally:
+        app.stop()
+
+
+def _camera_reported(client) -> bool:
+    try:
+        return client.camera.update_timestamp > 0
+    except AssertionError:  # viser asserts until the browser has sent its camera once
+        return False
+
+
+@pytest.mark.parametrize(("name", "up"), [("cactus.off", (0, 1, 0)), ("finger.off", (0, 0, 1))])
+def test_browser_opens_mesh_right_way_up(tmp_path, name, up):
+    """The page's own camera (reported back by the browser) has the guessed up direction."""
+    sync_playwright = _browser_or_skip()
+    app = example_app(name, tmp_path)
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS,
+                                        headless=True)
+            try:
+                page = browser.new_page(viewport={"width": 1200, "height": 800})
+                page.goto(app.url)
+                page.wait_for_selector("canvas", timeout=30_000)
+                wait_for(lambda: len(app.server.get_clients()) == 1, 30, "the page to connect")
+                client = next(iter(app.server.get_clients().values()))
+                wait_for(lambda: _camera_reported(client), 30, "the browser to report its camera")
+                wait_for(lambda: np.allclose(client.camera.up_direction, up, atol=1e-3), 10,
+                         f"the page's camera up direction to become {up}")
+                cam = client.camera
+                assert (np.asarray(cam.position) - np.asarray(cam.look_at)) @ np.asarray(up) > 0
+            finally:
+                browser.close()
+    finally:
+        app.stop()

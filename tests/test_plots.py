@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 import trimesh
 
+from arapkit.colors import ENERGY_CMAP, RING_COLORS
 from arapkit.errors import InputError
 from arapkit.plots import (
     cluster_simplify,
@@ -70,7 +71,7 @@ def test_cluster_simplify_respects_budget_and_shape(sphere):
 
 
 def test_render_colours_faces_by_value(tmp_path):
-    # two triangles side by side: left value 0, right value 1; viridis ends differ
+    # two triangles side by side: left value 0, right value 1; the energy map's ends differ
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0], [3, 0, 0], [3, 1, 0]], float)
     F = np.array([[0, 1, 2], [3, 4, 5]])
     fig, ax = plt.subplots(figsize=(4, 2), dpi=50)
@@ -79,19 +80,33 @@ def test_render_colours_faces_by_value(tmp_path):
     assert norm.vmin == 0.0 and norm.vmax == pytest.approx(0.99)
     save_figure(fig, tmp_path / "two.png")
     img = _assert_not_blank(tmp_path / "two.png")
-    lo, hi = np.array(plt.get_cmap("viridis")(0.0)[:3]), np.array(plt.get_cmap("viridis")(1.0)[:3])
+    cmap = plt.get_cmap(ENERGY_CMAP)
+    lo, hi = np.array(cmap(0.0)[:3]), np.array(cmap(1.0)[:3])
     # flat faces seen head-on get full light, so the pixel colours are the colour-map ends
     near = lambda c: np.any(np.all(np.abs(img - c) < 0.03, axis=-1))  # noqa: E731
     assert near(lo) and near(hi)
 
 
-def test_rings_colormap_uses_orange_and_grey_for_two_materials(tmp_path):
+def test_rings_colormap_gives_each_r_its_one_colour_everywhere(tmp_path):
     cmap, norm, levels = rings_colormap(np.array([2, 2, 6]))
     assert levels.tolist() == [2, 6]
-    orange, grey = cmap(norm(2)), cmap(norm(6))
-    assert orange[0] > orange[2] + 0.5 and np.ptp(grey[:3]) < 0.1
+    # the same r has the same colour in every figure and in the editor
+    for r in (2, 6):
+        np.testing.assert_allclose(np.array(cmap(norm(r))[:3]) * 255, RING_COLORS[r - 1],
+                                   atol=1e-9)
     cmap3, norm3, levels3 = rings_colormap(np.array([1, 3, 5, 3]))
     assert len({tuple(cmap3(norm3(v))) for v in levels3}) == 3
+    np.testing.assert_allclose(np.array(cmap3(norm3(3))[:3]) * 255, RING_COLORS[2], atol=1e-9)
+    # r above 6 takes the last colour, as in the editor's legend (6+)
+    cmap9, norm9, _ = rings_colormap(np.array([9]))
+    np.testing.assert_allclose(np.array(cmap9(norm9(9))[:3]) * 255, RING_COLORS[5], atol=1e-9)
+
+
+def test_energy_colour_map_is_light_at_zero():
+    # low energies must not turn a shape into a black silhouette (the shading then
+    # darkens it by at most 0.35): the map's low end is light
+    lo = np.array(plt.get_cmap(ENERGY_CMAP)(0.0)[:3])
+    assert lo.mean() > 0.85
 
 
 def test_deformation_figure_large_mesh_is_fast_and_not_blank(tmp_path):

@@ -14,31 +14,66 @@ Examples
 True
 """
 
-import os
+import os as _os
 
 # Parallel regions in the kernels are short and frequent. GNU OpenMP's default busy-wait
 # makes idle workers spin; on a machine shared with other processes that steals the cores
 # the working threads need (measured: 2-3x slower iterations). It must be set before numba
 # starts its OpenMP pool (at the first parallel call); an explicit user setting wins.
-os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
+_os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from .errors import InputError  # noqa: E402
+from .fileio import save_mesh
+from .handles import (
+    HandleGroup,
+    HandleSet,
+    load_handles,
+    load_rings,
+    parse_handles,
+    save_def,
+    save_handles,
+    save_rings,
+    save_sel,
+    select_box,
+    select_nearest,
+    select_sphere,
+)
 from .laplacian import LaplacianEditor, laplacian_edit
 from .learn import LearnedRings, learn_rings
 from .mesh import Mesh, load_mesh
+from .orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .solver import Deformer, Result
 
 __version__ = "0.1.0"
 
+# the public names: classes, then functions (submodules such as arapkit.plots are public too)
 __all__ = [
+    "BoundingBox",
     "Deformer",
+    "HandleGroup",
+    "HandleSet",
     "InputError",
     "LaplacianEditor",
     "LearnedRings",
     "Mesh",
     "Result",
+    "UpGuess",
     "__version__",
+    "bounding_box",
+    "guess_up",
     "laplacian_edit",
     "learn_rings",
+    "load_handles",
     "load_mesh",
+    "load_rings",
+    "parse_handles",
+    "save_def",
+    "save_handles",
+    "save_mesh",
+    "save_rings",
+    "save_sel",
+    "select_box",
+    "select_nearest",
+    "select_sphere",
 ]
+del _os  # only needed above; keeps arapkit.os / arapkit._os out of the namespace

@@ -60,7 +60,9 @@ __all__ = [
 
 SELECTION_KEYS = ("indices", "box", "sphere", "nearest")
 MOTION_KEYS = ("fixed", "translate", "rotate", "targets")
-GROUP_KEYS = frozenset(("name", *SELECTION_KEYS, *MOTION_KEYS))
+#: Free text for people, in a group or at the top level; ignored (JSON has no comments).
+COMMENT_KEY = "comment"
+GROUP_KEYS = frozenset(("name", COMMENT_KEY, *SELECTION_KEYS, *MOTION_KEYS))
 _SUB_KEYS = {
     "box": frozenset(("min", "max")),
     "sphere": frozenset(("center", "radius")),
@@ -192,10 +194,12 @@ def select_nearest(vertices: np.ndarray, point: Sequence[float], k: int) -> np.n
     [0, 1]
     """
     V = np.asarray(vertices, dtype=np.float64)
-    k = int(k)
-    if k < 1 or k > len(V):
-        raise ValueError(f"k must be in 1..{len(V)}, got {k}")
-    d2 = np.sum((V - np.asarray(point, float)) ** 2, axis=1)
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= len(V):
+        raise InputError(f"select_nearest: k must be an integer in 1..{len(V)}, got {k!r}")
+    P = np.asarray(point, dtype=np.float64)
+    if P.shape != (3,) or not np.all(np.isfinite(P)):
+        raise InputError(f"select_nearest: point must be 3 finite numbers, got {point!r}")
+    d2 = np.sum((V - P) ** 2, axis=1)
     # lexsort by (distance, index): stable and deterministic for equal distances
     order = np.lexsort((np.arange(len(V)), d2))[:k]
     return np.sort(order).astype(np.int64)
@@ -341,9 +345,11 @@ def _move(group: dict, rest: np.ndarray, err: _Where) -> tuple[np.ndarray, str]:
 
 def _group_list(data: Any, source: str) -> list:
     if isinstance(data, dict):
-        unknown = sorted(set(data) - {"groups"})
+        unknown = sorted(set(data) - {"groups", COMMENT_KEY})
         if unknown:
-            raise InputError(f"{source}: unknown top-level key {unknown[0]!r} (allowed: groups)")
+            raise InputError(
+                f"{source}: unknown top-level key {unknown[0]!r} (allowed: groups, comment)"
+            )
         if "groups" not in data:
             raise InputError(f"{source}: expected a list of handle groups or {{'groups': [...]}}")
         data = data["groups"]

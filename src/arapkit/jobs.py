@@ -38,8 +38,8 @@ from .energy import ENERGIES
 from .errors import Advice, InputError
 from .weights import DEFAULT_WEIGHTS
 
-__all__ = ["DEFAULT_ENERGY", "ENERGIES", "DeformJob", "PreparedJob", "job_report",
-           "method_description", "prepare_job", "save_result"]
+__all__ = ["DEFAULT_ENERGY", "ENERGIES", "DeformJob", "JobInputs", "PreparedJob", "job_report",
+           "load_job_inputs", "method_description", "prepare_job", "save_result"]
 
 #: r-ring ARAP, the default method (one of :data:`ENERGIES`, the methods this build can run)
 DEFAULT_ENERGY = ENERGIES[0]
@@ -130,15 +130,28 @@ def _load_handles(job: DeformJob, vertices: np.ndarray):
     return parse_handles(job.handles, vertices, source="<handles>")
 
 
-def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> PreparedJob:
-    """Load the mesh, handles and rings of ``job`` and build its deformer.
+@dataclass
+class JobInputs:
+    """A job's files read: the mesh solved (welded when asked), handles and rings on it."""
+
+    source: Any
+    mesh: Any
+    handles: Any
+    rings: np.ndarray | int
+    notes: list[str] = field(default_factory=list)
+    #: records a further note (e.g. the deformer's) like the loader's
+    tell: Callable[[str], None] | None = field(default=None, repr=False)
+
+
+def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -> JobInputs:
+    """Read the mesh, handles and rings of ``job`` (what a dry run shows; no solver built).
 
     Parameters
     ----------
     job : DeformJob
     note : callable, optional
-        Called with each note about the input (loader repairs, fixed components ...),
-        prefixed with the mesh file name.
+        Called with each note about the input (loader repairs, welding ...), prefixed with
+        the mesh file name.
 
     Raises
     ------
@@ -146,7 +159,6 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
         Any bad input, with a one-line message naming the file.
     """
     from .cli.common import load_mesh_checked
-    from .solver import Deformer
 
     if job.energy not in ENERGIES:
         raise InputError(f"energy {job.energy} is not available in this build "
@@ -168,7 +180,6 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
         mesh = weld(source, job.weld)
     for msg in mesh.notes if mesh is source else source.notes + mesh.notes:
         tell(msg)
-    extra = {"energy": job.energy, "sr_alpha": job.sr_alpha, "nodes": job.nodes}
     # handles and a rings map refer to the input's vertices: map them onto a welded mesh
     hs = _load_handles(job, source.vertices)
     if mesh is not source:
@@ -185,20 +196,43 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
             rings = weld_values(mesh, np.asarray(rings))
     else:
         rings = int(job.rings)
+    return JobInputs(source, mesh, hs, rings, notes, tell)
+
+
+def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> PreparedJob:
+    """Load the mesh, handles and rings of ``job`` and build its deformer.
+
+    Parameters
+    ----------
+    job : DeformJob
+    note : callable, optional
+        Called with each note about the input (loader repairs, fixed components ...),
+        prefixed with the mesh file name.
+
+    Raises
+    ------
+    InputError
+        Any bad input, with a one-line message naming the file.
+    """
+    from .solver import Deformer
+
+    inputs = load_job_inputs(job, note)
     deformer = Deformer(
-        mesh,
-        hs.indices,
-        rings=rings,
+        inputs.mesh,
+        inputs.handles.indices,
+        rings=inputs.rings,
         weights=job.weights,
         tol=job.tol,
         max_iter=job.max_iter,
         init=job.init,
         accelerate=job.accelerate,
-        **extra,
+        energy=job.energy,
+        sr_alpha=job.sr_alpha,
+        nodes=job.nodes,
     )
     for msg in deformer.notes:
-        tell(msg)
-    return PreparedJob(job, mesh, hs, deformer, notes)
+        inputs.tell(msg)
+    return PreparedJob(job, inputs.mesh, inputs.handles, deformer, inputs.notes)
 
 
 def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[str]:

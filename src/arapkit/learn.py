@@ -647,20 +647,10 @@ def rings_figure(
     r_min: int = 1,
     r_max: int = 6,
     title: str | None = None,
-    views: Sequence[tuple[float, float]] = ((15.0, -35.0), (15.0, 145.0)),
+    views: Sequence[str] = ("front", "back"),
+    up: str | None = None,
 ):
-    """Figure of a shape coloured by ring size, ``r_min`` blue ... ``r_max`` red (paper figs).
-
-    Parameters
-    ----------
-    vertices, faces : the (reference) shape.
-    rings : (n,) int
-    views : sequence of (elev, azim)
-        One panel per view (see :func:`arapkit.plots.view_basis`).
-
-    Returns
-    -------
-    matplotlib Figure (save it with :func:`arapkit.plots.save_figure`).
+    """Figure of a shape coloured by ring size: :func:`arapkit.plots.rings_figure`.
 
     Examples
     --------
@@ -669,25 +659,6 @@ def rings_figure(
     >>> len(rings_figure(m.vertices, m.faces, [3] * m.n_vertices).axes)  # 2 views + colour bar
     3
     """
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import BoundaryNorm, ListedColormap
+    from .plots import rings_figure as _figure
 
-    from .plots import render_mesh, view_basis
-
-    levels = np.arange(r_min, r_max + 1)
-    colours = plt.get_cmap("jet")(np.linspace(0.08, 0.92, len(levels)))
-    cmap = ListedColormap(colours)
-    norm = BoundaryNorm(np.append(levels - 0.5, r_max + 0.5), len(levels))
-    fig, axes = plt.subplots(1, len(views), figsize=(5.0 * len(views), 3.8), squeeze=False,
-                             layout="constrained")
-    values = np.asarray(rings, dtype=np.float64)
-    for ax, (elev, azim) in zip(axes[0], views, strict=True):
-        render_mesh(ax, vertices, faces, values, basis=view_basis(vertices, elev, azim),
-                    cmap=cmap, norm=norm)
-    sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
-    cb = fig.colorbar(sm, ax=list(axes[0]), orientation="horizontal", fraction=0.05, pad=0.03,
-                      ticks=levels)
-    cb.set_label("learned ring size r", fontsize=9)
-    if title:
-        fig.suptitle(title, fontsize=10)
-    return fig
+    return _figure(vertices, faces, rings, r_min, r_max, title=title, views=views, up=up)

@@ -1,10 +1,16 @@
 """Headless matplotlib figures: shaded meshes coloured by energy or rigidity, energy curves.
 
-Meshes are drawn as flat-shaded 2-D polygons in a fixed orthographic view, sorted back to
+Meshes are drawn as flat-shaded 2-D polygons in an orthographic view, sorted back to
 front (painter's algorithm), which is much faster than ``mplot3d`` and looks the same for
 the closed and open surfaces arapkit deforms. Meshes with more faces than ``max_faces`` are
 first simplified by vertex clustering on a regular grid, so a 100K- or 1M-face mesh draws in
 about the time of a ``max_faces`` one.
+
+Views are upright: the up axis is :func:`arapkit.orientation.guess_up`'s guess unless
+``up`` is given, and ``view`` picks *front* (default), *side*, *top* or *iso* (see
+:func:`arapkit.orientation.view_frame`). Colours: r always uses
+:data:`arapkit.colors.RING_COLORS` (1 blue ... 6+ red, as the editor), energy always
+:data:`arapkit.colors.ENERGY_CMAP` (pale at 0); panels that are compared share one scale.
 
 Examples
 --------
@@ -22,6 +28,9 @@ from collections.abc import Mapping, Sequence
 
 import matplotlib
 
+from arapkit.colors import ENERGY_CMAP, ring_rgb
+from arapkit.orientation import view_frame
+
 matplotlib.use("Agg")  # headless: never needs a display
 
 import matplotlib.pyplot as plt  # noqa: E402
@@ -29,18 +38,22 @@ import numpy as np  # noqa: E402
 from matplotlib.collections import PolyCollection  # noqa: E402
 from matplotlib.colors import BoundaryNorm, Colormap, ListedColormap, Normalize  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.ticker import MaxNLocator  # noqa: E402
+from matplotlib.ticker import FuncFormatter, MaxNLocator  # noqa: E402
 
 __all__ = [
     "DEFAULT_MAX_FACES",
+    "ENERGY_CMAP",
     "cluster_simplify",
     "deformation_figure",
+    "groups_figure",
     "energy_curves_figure",
     "iterations_figure",
     "render_mesh",
     "rings_colormap",
+    "rings_figure",
     "save_figure",
     "series_figure",
+    "value_norm",
     "view_basis",
 ]
 
@@ -175,7 +188,7 @@ def render_mesh(
     values: np.ndarray | None = None,
     *,
     basis: np.ndarray | None = None,
-    cmap: str | Colormap = "viridis",
+    cmap: str | Colormap = ENERGY_CMAP,
     norm: Normalize | None = None,
     max_faces: int = DEFAULT_MAX_FACES,
     color: Sequence[float] | None = None,
@@ -190,8 +203,8 @@ def render_mesh(
     values : (n,) float, optional
         Per-vertex scalar; each face takes the mean of its corners.
     basis : (3, 3), optional
-        View basis from :func:`view_basis`; computed from ``vertices`` when omitted. Pass the
-        same basis to several panels to compare shapes.
+        View basis from :func:`arapkit.orientation.view_frame` (default: its upright front
+        view of ``vertices``). Pass the same basis to several panels to compare shapes.
     cmap, norm : colour map and normalisation for ``values``; ``norm`` defaults to
         ``[0, 99th percentile]`` so a few extreme faces do not wash out the rest.
     max_faces : int
@@ -215,7 +228,7 @@ def render_mesh(
     True
     """
     V, F, vals = cluster_simplify(vertices, faces, max_faces, values, reduce)
-    B = view_basis(V) if basis is None else np.asarray(basis)
+    B = view_frame(V)[0] if basis is None else np.asarray(basis)
     P = V @ B.T  # screen x, screen y, depth (towards viewer)
     tri = P[F]
     normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
@@ -226,10 +239,7 @@ def render_mesh(
         corner = np.asarray(vals, dtype=np.float64)[F]
         fv = corner.max(axis=1) if reduce == "max" else corner.mean(axis=1)
         if norm is None:
-            finite = fv[np.isfinite(fv)]
-            hi = float(np.percentile(finite, 99)) if finite.size else 1.0
-            lo = min(0.0, float(finite.min())) if finite.size else 0.0
-            norm = Normalize(lo, hi if hi > lo else lo + 1.0)
+            norm = value_norm([fv])
         rgb = plt.get_cmap(cmap)(norm(fv))[:, :3]
     else:
         rgb = np.tile(np.asarray(color if color is not None else _REST_COLOR), (len(F), 1))
@@ -241,6 +251,22 @@ def render_mesh(
     ax.add_collection(coll)
     _frame(ax, P[:, :2])
     return norm
+
+
+def value_norm(values: Sequence[np.ndarray]) -> Normalize:
+    """One colour scale for several arrays: [min(0, lowest), 99th percentile of all].
+
+    Examples
+    --------
+    >>> n = value_norm([np.zeros(999), np.ones(1) * 1e6])   # one spike does not set the scale
+    >>> n.vmin, n.vmax
+    (0.0, 1.0)
+    """
+    finite = np.concatenate([np.ravel(v) for v in values]).astype(np.float64)
+    finite = finite[np.isfinite(finite)]
+    hi = float(np.percentile(finite, 99)) if finite.size else 1.0
+    lo = min(0.0, float(finite.min())) if finite.size else 0.0
+    return Normalize(lo, hi if hi > lo else lo + 1.0)
 
 
 def _frame(ax: plt.Axes, xy: np.ndarray) -> None:
@@ -272,18 +298,32 @@ def _colorbar(fig: Figure, ax, norm: Normalize, cmap, label: str) -> None:
     if isinstance(norm, BoundaryNorm):
         # rings_colormap puts each level's lower bound at level - 0.5
         cb.set_ticklabels([f"{v + 0.5:g}" for v in norm.boundaries[:-1]])
+    else:
+        # few ticks: long labels such as 0.00025 would otherwise run into each other
+        # and no "1e-5" offset text, which lands on the label
+        cb.locator = MaxNLocator(nbins=4)
+        cb.formatter = FuncFormatter(lambda v, _: f"{v:.3g}")
+        cb.update_ticks()
     cb.set_label(label, fontsize=8)
     cb.ax.tick_params(labelsize=7)
 
 
-def rings_colormap(rings: np.ndarray) -> tuple[Colormap, BoundaryNorm, np.ndarray]:
-    """Discrete colour map for a rigidity map: one colour per distinct r.
+def rings_colormap(
+    rings: np.ndarray, levels: Sequence[int] | None = None
+) -> tuple[Colormap, BoundaryNorm, np.ndarray]:
+    """Discrete colour map for a rigidity map: one bin per r, coloured as everywhere else.
 
-    Two materials use the paper's Fig. 8 colours (soft orange, hard grey).
+    Colours come from :data:`arapkit.colors.RING_COLORS` (1 blue ... 6 and above red, the
+    editor's colours), so r = 2 has the same colour in every figure.
+
+    Parameters
+    ----------
+    rings : (n,) int
+    levels : the r values to give a bin (default: the distinct values of ``rings``).
 
     Returns
     -------
-    cmap, norm, levels (the distinct r values)
+    cmap, norm, levels
 
     Examples
     --------
@@ -291,15 +331,16 @@ def rings_colormap(rings: np.ndarray) -> tuple[Colormap, BoundaryNorm, np.ndarra
     >>> rings_colormap(np.array([2, 6, 6]))[2].tolist()
     [2, 6]
     """
-    levels = np.unique(np.asarray(rings, dtype=np.int64))
+    if levels is None:
+        levels = np.unique(np.asarray(rings, dtype=np.int64))
+    levels = np.asarray(levels, dtype=np.int64)
     bounds = np.concatenate([levels - 0.5, [levels[-1] + 0.5]])
-    if len(levels) == 2:
-        colors = np.array([[0.95, 0.55, 0.15, 1.0], [0.70, 0.72, 0.76, 1.0]])
-    elif len(levels) == 1:
-        colors = plt.get_cmap("plasma")([0.4])
-    else:
-        colors = plt.get_cmap("plasma")(np.linspace(0.1, 0.85, len(levels)))
+    colors = np.concatenate([ring_rgb(levels) / 255.0, np.ones((len(levels), 1))], axis=1)
     return ListedColormap(colors), BoundaryNorm(bounds, len(levels)), levels
+
+
+def _camera(points: np.ndarray, view: str, up: str | None) -> np.ndarray:
+    return view_frame(points, view, up)[0]
 
 
 # --------------------------------------------------------------------------- figures
@@ -318,6 +359,8 @@ def deformation_figure(
     rings: np.ndarray | None = None,
     title: str | None = None,
     max_faces: int = DEFAULT_MAX_FACES,
+    view: str = "front",
+    up: str | None = None,
 ) -> Figure:
     """Summary figure of one deformation.
 
@@ -341,6 +384,8 @@ def deformation_figure(
     title : str, optional
     max_faces : int
         Display budget per panel (see :func:`cluster_simplify`).
+    view, up : camera (see :func:`arapkit.orientation.view_frame`), set from the rest shape
+        and shared by all panels.
 
     Examples
     --------
@@ -358,7 +403,7 @@ def deformation_figure(
     n_panels = 4 if varying else 3
     fig = plt.figure(figsize=(4.0 * n_panels, 4.2), dpi=110, layout="constrained")
     axes = fig.subplots(1, n_panels, width_ratios=[1.0] * (n_panels - 1) + [0.9])
-    basis = view_basis(np.concatenate([rest, deformed]), right=_principal_axes(rest)[0])
+    basis = _camera(rest, view, up)
 
     # paint the faces around handles (occlusion-correct at any handle count); add markers
     # only for small handle sets, where single vertices would be too small to see
@@ -389,16 +434,19 @@ def deformation_figure(
         kinds = [("fixed", _FIXED_COLOR, fixed.any()), ("moved", _MOVED_COLOR, (~fixed).any())]
         axes[0].legend(
             handles=[Patch(color=c, label=k) for k, c, present in kinds if present],
-            loc="lower left",
+            loc="upper center",
+            bbox_to_anchor=(0.5, 0.0),
+            ncol=2,
             fontsize=7,
             frameon=False,
         )
 
     norm = render_mesh(
-        axes[1], deformed, faces, vertex_energy, basis=basis, cmap="magma", max_faces=max_faces
+        axes[1], deformed, faces, vertex_energy, basis=basis, cmap=ENERGY_CMAP,
+        max_faces=max_faces,
     )
     axes[1].set_title("deformed: per-vertex energy", fontsize=9)
-    _colorbar(fig, axes[1], norm, "magma", "energy (clipped at 99th percentile)")
+    _colorbar(fig, axes[1], norm, ENERGY_CMAP, "per-vertex energy (clipped at 99th percentile)")
 
     if varying:
         cmap, rnorm, levels = rings_colormap(rings)
@@ -470,11 +518,13 @@ def series_figure(
     faces: np.ndarray,
     panels: Sequence[tuple[str, np.ndarray, np.ndarray | None]],
     *,
-    cmap: str | Colormap = "magma",
+    cmap: str | Colormap = ENERGY_CMAP,
     norm: Normalize | None = None,
     colorbar_label: str = "energy",
     ncols: int | None = None,
     max_faces: int = DEFAULT_MAX_FACES,
+    view: str = "front",
+    up: str | None = None,
 ) -> Figure:
     """Several shapes of one mesh side by side in a common view (the paper's Fig. 3 / 8).
 
@@ -483,10 +533,13 @@ def series_figure(
     faces : (m, 3)
     panels : list of (title, vertices (n, 3), values (n,) or None)
         Panels without values are drawn plain grey.
-    cmap, norm : colouring of the values; each panel gets its own normalisation (and colour
-        bar) unless ``norm`` is given, in which case one shared colour bar is drawn.
+    cmap, norm : colouring of the values. All panels share one scale (``norm``, default
+        :func:`value_norm` of all panels' values) and one colour bar that says so, so that
+        colours compare across panels.
     ncols : int, optional
         Panels per row (default: all in one row).
+    view, up : camera (see :func:`arapkit.orientation.view_frame`), set from the first
+        panel's shape and shared by all.
 
     Examples
     --------
@@ -500,20 +553,109 @@ def series_figure(
     nrows = -(-len(panels) // ncols)
     fig = plt.figure(figsize=(3.0 * ncols, 3.3 * nrows), dpi=110, layout="constrained")
     axes = np.atleast_1d(fig.subplots(nrows, ncols)).ravel()
-    basis = view_basis(
-        np.concatenate([p[1] for p in panels]), right=_principal_axes(panels[0][1])[0]
-    )
+    basis = _camera(panels[0][1], view, up)
+    F = np.asarray(faces)
+    valued = [np.asarray(v, float)[F].mean(axis=1) for _, _, v in panels if v is not None]
+    ours = norm is None
+    if ours and valued:
+        norm = value_norm(valued)
     for ax, (title, V, vals) in zip(axes, panels, strict=False):
-        used = render_mesh(
-            ax, V, faces, vals, basis=basis, cmap=cmap, norm=norm, max_faces=max_faces
-        )
+        render_mesh(ax, V, faces, vals, basis=basis, cmap=cmap, norm=norm, max_faces=max_faces)
         ax.set_title(title, fontsize=9)
-        if vals is not None and norm is None:
-            _colorbar(fig, ax, used, cmap, colorbar_label)
     for ax in axes[len(panels) :]:
         ax.set_axis_off()
-    if norm is not None:
-        _colorbar(fig, list(axes[: len(panels)]), norm, cmap, colorbar_label)
+    if valued:
+        clip = ", clipped at the 99th percentile" if ours else ""
+        label = f"{colorbar_label} (one scale for all panels{clip})"
+        _colorbar(fig, list(axes[: len(panels)]), norm, cmap, label)
+    return fig
+
+
+def rings_figure(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    rings: np.ndarray,
+    r_min: int = 1,
+    r_max: int = 6,
+    title: str | None = None,
+    views: Sequence[str] = ("front", "back"),
+    up: str | None = None,
+    max_faces: int = DEFAULT_MAX_FACES,
+) -> Figure:
+    """A shape coloured by ring size r (one bin per r from ``r_min`` to ``r_max``).
+
+    One labelled panel per view (see :func:`arapkit.orientation.view_frame`); colours as
+    everywhere else (:data:`arapkit.colors.RING_COLORS`).
+
+    Examples
+    --------
+    >>> from arapkit.shapes import bar
+    >>> m = bar()
+    >>> fig = rings_figure(m.vertices, m.faces, [3] * m.n_vertices)
+    >>> [a.get_title() for a in fig.axes[:2]]
+    ['front view (up +z)', 'back view (up +z)']
+    """
+    levels = np.arange(r_min, r_max + 1)
+    cmap, norm, _ = rings_colormap(levels, levels)
+    # at least 8 inches wide: the title (file name, counts, omega) must fit one view too
+    width = max(5.0 * len(views), 8.0)
+    fig, axes = plt.subplots(1, len(views), figsize=(width, 3.8), squeeze=False,
+                             layout="constrained")
+    values = np.asarray(rings, dtype=np.float64)
+    for ax, view in zip(axes[0], views, strict=True):
+        basis, used_up = view_frame(vertices, view, up)
+        render_mesh(ax, vertices, faces, values, basis=basis, cmap=cmap, norm=norm,
+                    max_faces=max_faces)
+        ax.set_title(f"{view} view (up {used_up})", fontsize=9)
+    _colorbar(fig, list(axes[0]), norm, cmap, "learned ring size r (1 soft ... 6+ rigid)")
+    if title:
+        fig.suptitle(title, fontsize=10)
+    return fig
+
+
+def groups_figure(
+    vertices: np.ndarray,
+    faces: np.ndarray,
+    groups: Sequence[tuple[str, np.ndarray]],
+    *,
+    title: str | None = None,
+    view: str = "front",
+    up: str | None = None,
+    max_faces: int = DEFAULT_MAX_FACES,
+) -> Figure:
+    """The rest shape with each handle group's faces in its own colour (``--dry-run``).
+
+    Parameters
+    ----------
+    groups : list of (label, vertex indices)
+        Faces touching a group's vertices take its colour (later groups win).
+
+    Examples
+    --------
+    >>> from arapkit.shapes import bar
+    >>> m = bar()
+    >>> fig = groups_figure(m.vertices, m.faces, [("left", [0, 1]), ("right", [5])])
+    >>> len(fig.axes)
+    1
+    """
+    from matplotlib.patches import Patch
+
+    palette = plt.get_cmap("tab10").colors
+    labels = np.zeros(len(vertices))
+    for k, (_, idx) in enumerate(groups):
+        labels[np.asarray(idx, dtype=np.int64)] = k + 1
+    colours = [_REST_COLOR] + [palette[k % 10] for k in range(len(groups))]
+    cmap = ListedColormap(colours)
+    norm = BoundaryNorm(np.arange(len(colours) + 1) - 0.5, len(colours))
+    fig, ax = plt.subplots(figsize=(6.0, 4.6), dpi=110, layout="constrained")
+    basis, used_up = view_frame(vertices, view, up)
+    render_mesh(ax, vertices, faces, labels, basis=basis, cmap=cmap, norm=norm,
+                max_faces=max_faces, reduce="max")
+    ax.legend(handles=[Patch(color=colours[k + 1], label=f"{name} ({len(idx)})")
+                       for k, (name, idx) in enumerate(groups)],
+              loc="center left", bbox_to_anchor=(1.0, 0.5), fontsize=7, frameon=False)
+    ax.set_title(title or f"handle groups on the rest shape ({view} view, up {used_up})",
+                 fontsize=9)
     return fig
 
 

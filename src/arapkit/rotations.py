@@ -43,6 +43,8 @@ import math
 import numba as nb
 import numpy as np
 
+from arapkit.errors import InputError
+
 # Largest off-diagonal norm of the Jacobi-rotated Gram matrix, relative to its trace,
 # that counts as converged.  tr(R S) is only second-order sensitive to it; R itself is
 # then accurate to ~1e-14 / kappa, kappa = (sigma_2 + sign(det S) sigma_3) / sigma_1.
@@ -584,13 +586,16 @@ def fit_rotations(S: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
     >>> np.allclose(R[0], np.eye(3))
     True
     """
-    S = np.ascontiguousarray(S, dtype=np.float64)
+    try:
+        S = np.ascontiguousarray(S, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise InputError(f"fit_rotations: S must be numbers ({e})") from None
     if S.ndim != 3 or S.shape[1:] != (3, 3):
-        raise ValueError(f"fit_rotations: S must have shape (n, 3, 3), got {S.shape}")
+        raise InputError(f"fit_rotations: S must have shape (n, 3, 3), got {S.shape}")
     if out is None:
         out = np.empty_like(S)
     elif out.shape != S.shape or out.dtype != np.float64 or not out.flags.c_contiguous:
-        raise ValueError(
+        raise InputError(
             f"fit_rotations: out must be a C-contiguous float64 array of shape {S.shape}"
         )
     _fit_all(S, out)

@@ -38,11 +38,12 @@ COMMANDS: list[tuple[str, str]] = [
     ("batch", "arapkit.cli.batch"),
 ]
 
-_EPILOG = """examples:
+_EPILOG = """examples (from a clone of the repository, which ships examples/):
   arapkit demo --out demo-output
-  arapkit info mesh.off
-  arapkit deform mesh.off --handles handles.json --rings 4 -o bent.ply --figure bent.png
-  arapkit deform bar.off --handles bar.sel --transform bar.def -o out.off --report run.json
+  arapkit info examples/cactus.off
+  arapkit deform examples/cactus.off --handles examples/cactus.json --dry-run --figure groups.png
+  arapkit deform examples/cactus.off -H examples/cactus.json -r 4 -o bent.ply --figure bent.png
+  arapkit deform examples/bar.off --handles examples/bar.sel --transform examples/bar.def -o out.off
 """
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+import time
 from collections.abc import Callable
 from typing import Any
 
@@ -15,6 +16,7 @@ from arapkit.errors import InputError
 __all__ = [
     "Progress",
     "add_weld_option",
+    "add_view_options",
     "load_mesh_checked",
     "maybe_weld",
     "note",
@@ -55,6 +57,44 @@ def positive_float(text: str) -> float:
     if not math.isfinite(value) or value <= 0:
         raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
     return value
+
+
+def add_view_options(parser: argparse.ArgumentParser) -> None:
+    """Add ``--view`` and ``--up`` to a command that draws figures.
+
+    Read them back with ``view=args.view, up=args.up`` for the functions of
+    :mod:`arapkit.plots` (``up`` None means the guess of :func:`arapkit.orientation.guess_up`).
+
+    Examples
+    --------
+    >>> p = argparse.ArgumentParser(); add_view_options(p)
+    >>> a = p.parse_args(["--view", "iso", "--up=-y"]); a.view, a.up
+    ('iso', '-y')
+    """
+    from arapkit.orientation import AXES, VIEWS
+
+    def axis(text: str) -> str:
+        t = text.strip().lower()
+        t = "+" + t if t in ("x", "y", "z") else t
+        if t not in AXES:
+            raise argparse.ArgumentTypeError(f"expected one of {', '.join(AXES)}, got {text!r}")
+        return t
+
+    parser.add_argument(
+        "--view",
+        choices=VIEWS,
+        default="front",
+        help="camera of the figures: front looks along the thinnest horizontal axis "
+        "(default front)",
+    )
+    parser.add_argument(
+        "--up",
+        type=axis,
+        default=None,
+        metavar="AXIS",
+        help=f"axis pointing up in the figures: {', '.join(AXES)}; write a negative one as "
+        "--up=-y (default: guessed; arapkit info prints the guess)",
+    )
 
 
 def load_mesh_checked(path: str):
@@ -129,10 +169,12 @@ def warn(message: str) -> None:
 
 
 class Progress:
-    """tqdm progress bar on stderr fed by :meth:`arapkit.Deformer.solve`'s callback.
+    """Solver progress on stderr, fed by :meth:`arapkit.Deformer.solve`'s callback.
 
-    Shows iteration, energy and relative decrease. It only appears once a solve has run
-    for ``delay`` seconds, so quick solves print nothing.
+    On a terminal: a tqdm bar (iteration, energy, relative decrease) that appears once a
+    solve has run for ``delay`` seconds, so quick solves print nothing. Elsewhere (a log
+    file, a pipe, CI) a bar's carriage returns would garble the log, so a plain line is
+    printed instead, after ``delay`` seconds and then every ``interval`` seconds.
 
     Examples
     --------
@@ -142,20 +184,30 @@ class Progress:
     """
 
     def __init__(
-        self, total: int | None = None, disable: bool = False, delay: float = 0.5, desc: str = ""
+        self,
+        total: int | None = None,
+        disable: bool = False,
+        delay: float = 0.5,
+        desc: str = "",
+        interval: float = 5.0,
     ) -> None:
-        from tqdm import tqdm
+        self._desc = desc or "solving"
+        self._disable, self._delay, self._interval = disable, delay, interval
+        self._bar = None
+        self._start = time.perf_counter()
+        self._last_line = -math.inf
+        if not disable and _is_terminal(sys.stderr):
+            from tqdm import tqdm
 
-        self._bar = tqdm(
-            total=total,
-            disable=disable,
-            delay=delay,
-            file=sys.stderr,
-            desc=desc or "solving",
-            unit="it",
-            dynamic_ncols=True,
-            leave=False,
-        )
+            self._bar = tqdm(
+                total=total,
+                delay=delay,
+                file=sys.stderr,
+                desc=self._desc,
+                unit="it",
+                dynamic_ncols=True,
+                leave=False,
+            )
         self._prev: float | None = None
 
     def __call__(self, iteration: int, energy: float, vertices: Any) -> bool:
@@ -163,18 +215,34 @@ class Progress:
         if self._prev is not None and self._prev != 0:
             rel = (self._prev - energy) / abs(self._prev)
         self._prev = energy
-        self._bar.update(max(iteration - self._bar.n, 0))
-        self._bar.set_postfix_str(f"energy {energy:.4g}, rel. decrease {rel:.2e}", refresh=False)
+        status = f"energy {energy:.4g}, rel. decrease {rel:.2e}"
+        if self._bar is not None:
+            self._bar.update(max(iteration - self._bar.n, 0))
+            self._bar.set_postfix_str(status, refresh=False)
+        elif not self._disable:
+            now = time.perf_counter()
+            if now - self._start >= self._delay and now - self._last_line >= self._interval:
+                self._last_line = now
+                print(f"arapkit: {self._desc}: iteration {iteration}, {status}",
+                      file=sys.stderr, flush=True)
         return False
 
     def close(self) -> None:
-        self._bar.close()
+        if self._bar is not None:
+            self._bar.close()
 
     def __enter__(self) -> Progress:
         return self
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _is_terminal(stream: Any) -> bool:
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):  # replaced or closed streams
+        return False
 
 
 def rings_summary(rings: np.ndarray) -> dict[str, Any]:

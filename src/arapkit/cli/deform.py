@@ -20,6 +20,7 @@ import numpy as np
 from arapkit.cli.common import (
     Progress,
     add_example_epilog,
+    add_view_options,
     add_weld_option,
     note,
     positive_float,
@@ -32,10 +33,14 @@ from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 __all__ = ["add_parser", "run"]
 
 EXAMPLES = [
-    "arapkit deform cow.off --handles cow.json -o cow-bent.ply",
-    "arapkit deform bar.off --handles bar.json --rings 6 -o bar6.ply --figure bar6.png",
-    "arapkit deform bar.off --handles bar.sel --transform bar.def --rings-file r.txt -o out.off",
-    "arapkit deform bar.off --handles bar.json -o out.ply --report - --quiet | jq .result",
+    "arapkit deform examples/bar.off --handles examples/bar-bend.json --dry-run "
+    "--figure groups.png",
+    "arapkit deform examples/bar.off --handles examples/bar-bend.json --rings 6 -o bar6.ply "
+    "--figure bar6.png",
+    "arapkit deform examples/bar.off --handles examples/bar.sel --transform examples/bar.def "
+    "--rings-file examples/bar-rings.txt -o out.off",
+    "arapkit deform examples/cactus.off --handles examples/cactus.json -o out.ply --report - "
+    "--quiet | jq .result",
 ]
 
 
@@ -130,9 +135,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument(
         "-o",
         "--output",
-        required=True,
         metavar="OUT",
-        help="deformed mesh; format from the extension (.ply keeps energy and rings)",
+        help="deformed mesh; format from the extension (.ply keeps energy and rings); "
+        "required unless --dry-run",
     )
     p.add_argument(
         "--report",
@@ -140,6 +145,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="JSON report (parameters, timings, energy history); '-' for stdout",
     )
     p.add_argument("--figure", metavar="FILE", help="summary figure (.png, .pdf, .svg or .jpg)")
+    p.add_argument(
+        "--dry-run",
+        action="store_true",
+        help="no solve: print each handle group's vertex count and motion, and draw the "
+        "groups on the rest shape with --figure",
+    )
+    add_view_options(p)
     add_weld_option(p)
     p.add_argument("--force", action="store_true", help="allow overwriting an input file")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar or notes")
@@ -165,9 +177,13 @@ def _check_outputs(args: argparse.Namespace) -> None:
     from arapkit.fileio import check_figure_format, check_output_path, mesh_format
 
     inputs = [args.mesh, args.handles, args.transform, args.rings_file]
-    check_output_path(args.output, inputs, args.force, "output")
-    mesh_format(args.output)
-    outs = [Path(args.output).resolve()]
+    outs = []
+    if args.output is None and not args.dry_run:
+        raise InputError("-o/--output OUT is required (only --dry-run writes no mesh)")
+    if args.output is not None:
+        check_output_path(args.output, inputs, args.force, "output")
+        mesh_format(args.output)
+        outs.append(Path(args.output).resolve())
     if args.report and args.report != "-":
         check_output_path(args.report, inputs, args.force, "report")
         outs.append(Path(args.report).resolve())
@@ -176,7 +192,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_figure_format(args.figure)
         outs.append(Path(args.figure).resolve())
     if len(set(outs)) != len(outs):
-        raise InputError(f"{args.output}: output, report and figure must be different files")
+        raise InputError(f"{outs[0]}: output, report and figure must be different files")
 
 
 def _job(args: argparse.Namespace, method: dict[str, Any]):
@@ -202,13 +218,17 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit deform``; returns the exit status."""
     from arapkit.fileio import write_json
-    from arapkit.jobs import job_report, prepare_job, save_result
+    from arapkit.jobs import job_report, load_job_inputs, prepare_job, save_result
 
     t0 = time.perf_counter()
     method = _check_method(args)
     _check_outputs(args)
     job = _job(args, method)
-    prepared = prepare_job(job, note=lambda msg: note(worded_for(msg, "cli"), args.quiet))
+    tell = lambda msg: note(worded_for(msg, "cli"), args.quiet)  # noqa: E731
+    if args.dry_run:
+        inputs = load_job_inputs(job, note=tell)
+        return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings)
+    prepared = prepare_job(job, note=tell)
     mesh, hs = prepared.mesh, prepared.handles
     with Progress(disable=args.quiet) as progress:
         res = prepared.solve(callback=progress)
@@ -248,6 +268,8 @@ def run(args: argparse.Namespace) -> int:
             rings=r_full,
             title=f"{Path(args.mesh).name}: {_describe_method(args, r_full)}, "
             f"{res.iterations} iterations",
+            view=args.view,
+            up=args.up,
         )
         save_figure(fig, args.figure)
 
@@ -277,6 +299,60 @@ def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
     if args.energy == "embedded":
         return f"embedded deformation, {opts['nodes']} nodes"
     return args.energy
+
+
+def describe_groups(vertices: np.ndarray, hs) -> list[str]:
+    """One line per handle group: name, vertex count, motion (what ``--dry-run`` prints).
+
+    Examples
+    --------
+    >>> from arapkit.handles import parse_handles
+    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
+    >>> hs = parse_handles([{"name": "a", "indices": [0]},
+    ...                     {"name": "b", "indices": [2], "translate": [0, 1, 0]}], V)
+    >>> print("\n".join(describe_groups(V, hs)))
+    a: 1 vertex, fixed
+    b: 1 vertex, moved: mean displacement [0, 1, 0], largest 1
+    """
+    lines = []
+    for g in hs.groups:
+        n = len(g.indices)
+        head = f"{g.name}: {n} vertex" if n == 1 else f"{g.name}: {n} vertices"
+        d = np.asarray(g.targets) - vertices[g.indices]
+        if g.kind == "fixed" or not np.any(d):
+            lines.append(f"{head}, fixed")
+            continue
+        mean = ", ".join(f"{x:.4g}" for x in d.mean(axis=0) + 0.0)
+        big = float(np.linalg.norm(d, axis=1).max())
+        lines.append(f"{head}, moved: mean displacement [{mean}], largest {big:.4g}")
+    return lines
+
+
+def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
+    """Print what the handle file selects and how it moves it; draw it; solve nothing."""
+    from arapkit.orientation import bounding_box
+
+    box = bounding_box(mesh.vertices)
+    print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices, box min "
+          f"{_vec(box.min)} max {_vec(box.max)})")
+    print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
+    for line in describe_groups(mesh.vertices, hs):
+        print(f"  {line}")
+    r = np.broadcast_to(np.asarray(rings), (mesh.n_vertices,))
+    print(f"rings: r = {_describe_rings(r)}; dry run: nothing solved, no mesh written")
+    if args.figure:
+        from arapkit.plots import groups_figure, save_figure
+
+        groups = [(g.name, g.indices) for g in hs.groups]
+        fig = groups_figure(mesh.vertices, mesh.faces, groups, view=args.view, up=args.up,
+                            title=f"{Path(args.handles).name} on {Path(args.mesh).name}")
+        save_figure(fig, args.figure)
+        print(f"figure: {args.figure}")
+    return 0
+
+
+def _vec(v: np.ndarray) -> str:
+    return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
 
 
 def _describe_rings(r: np.ndarray) -> str:

@@ -22,7 +22,13 @@ from typing import Any
 
 import numpy as np
 
-from arapkit.cli.common import Progress, add_example_epilog, note, positive_int
+from arapkit.cli.common import (
+    Progress,
+    add_example_epilog,
+    add_view_options,
+    note,
+    positive_int,
+)
 from arapkit.errors import InputError
 
 __all__ = ["PAPER_RINGS", "add_parser", "format_table", "run"]
@@ -71,6 +77,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--degrees", type=float, default=180.0, help="bending angle in degrees (default 180)"
     )
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bars or notes")
+    add_view_options(p)
     return p
 
 
@@ -188,7 +195,9 @@ def run(args: argparse.Namespace) -> int:
         {"energy": mixed.vertex_energy, "rings": soft_hard},
     )
 
-    figures = _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed, plots)
+    camera = {"view": args.view, "up": args.up}
+    figures = _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed, plots,
+                       camera)
     comparison = _comparison(out, mesh, handles, targets, soft_hard, plots)
     figures.append("compare.png")
     report = {
@@ -240,7 +249,8 @@ def _comparison(out: Path, mesh, handles, targets, soft_hard, plots) -> list[dic
     return rows
 
 
-def _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed, plots) -> list:
+def _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed, plots,
+             camera) -> list:
     """Write the paper-style figures; returns their file names."""
     F = mesh.faces
     names = []
@@ -250,7 +260,8 @@ def _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed,
         (f"r = {r} ({results[r].iterations} it.)", results[r].vertices, results[r].vertex_energy)
         for r in rings_list
     ]
-    fig = plots.series_figure(F, panels, colorbar_label="energy", ncols=min(len(panels), 3))
+    fig = plots.series_figure(F, panels, colorbar_label="per-vertex energy",
+                              ncols=min(len(panels), 3), **camera)
     plots.save_figure(fig, out / "fig3_bar_bend.png")
     names.append("fig3_bar_bend.png")
 
@@ -262,14 +273,14 @@ def _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed,
     plots.save_figure(fig, out / "fig5_iterations.png")
     names.append("fig5_iterations.png")
 
-    cmap, norm, _ = plots.rings_colormap(soft_hard)
+    cmap, norm, _ = plots.rings_colormap(soft_hard, levels=(2, 6))
     panels = [("rest: soft middle r = 2, rest r = 6", mesh.vertices, soft_hard)]
     for r in (2, 6):
         if r in results:
             panels.append((f"uniform r = {r}", results[r].vertices, np.full(len(soft_hard), r)))
     panels.insert(2 if len(panels) > 1 else 1, ("mixed r = 2 / 6", mixed.vertices, soft_hard))
     fig = plots.series_figure(
-        F, panels, cmap=cmap, norm=norm, colorbar_label="r (rings)", ncols=len(panels)
+        F, panels, cmap=cmap, norm=norm, colorbar_label="r (rings)", ncols=len(panels), **camera
     )
     plots.save_figure(fig, out / "fig8_two_materials.png")
     names.append("fig8_two_materials.png")
@@ -286,6 +297,7 @@ def _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed,
         rings=rfull,
         fixed_mask=np.all(targets == mesh.vertices[handles], axis=1),
         title="two-material bar (r = 2 middle, 6 elsewhere)",
+        **camera,
     )
     plots.save_figure(fig, out / "two_materials_summary.png")
     names.append("two_materials_summary.png")

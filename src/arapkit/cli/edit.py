@@ -17,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from arapkit.cli.common import add_example_epilog
+
 _DESCRIPTION = """\
 Start a local editor in the browser: pick handle regions (click or Shift+drag a rectangle),
 drag their gizmos to deform the mesh live, paint the rigidity r with a brush or a paint
@@ -26,13 +28,21 @@ handle. The server binds 127.0.0.1 unless --host says otherwise; press Ctrl-C to
 """
 
 
+EXAMPLES = [
+    "arapkit edit                                  # the built-in bar, ends as handles",
+    "arapkit edit examples/cactus.off --handles examples/cactus.json --rings 2",
+    "arapkit edit mesh.off --rings-file rings.txt --export-dir out --port 9000",
+    "arapkit edit --session out/mesh-session.json  # resume a saved session",
+]
+
+
 def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     """Register ``edit`` on an argparse subparsers object and return its parser."""
     p = subparsers.add_parser(
         "edit",
         help="interactive browser editor (drag handles, paint r)",
         description=_DESCRIPTION,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+        **add_example_epilog(EXAMPLES),
     )
     p.add_argument(
         "mesh", nargs="?", metavar="MESH", help="OBJ/PLY/OFF/STL mesh (default: the built-in bar)"
@@ -66,6 +76,13 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         default="arapkit-edits",
         metavar="DIR",
         help="folder for exports and saved sessions (default ./arapkit-edits)",
+    )
+    p.add_argument(
+        "--up",
+        default=None,
+        metavar="AXIS",
+        help="axis shown up: +x, -x, +y, -y, +z or -z (write --up=-y); default: guessed "
+        "from the mesh, as arapkit info prints it",
     )
     p.add_argument(
         "--max-upload-mb",
@@ -141,6 +158,17 @@ def _bar_state() -> Any:
     return st
 
 
+def _up(text: str | None) -> str | None:
+    """``--up`` as the editor spells it ('y' = '+y'), or None to guess."""
+    from arapkit.orientation import parse_axis
+
+    if text is None:
+        return None
+    v = parse_axis(text)
+    k = int(np.argmax(np.abs(v)))
+    return ("+" if v[k] > 0 else "-") + "xyz"[k]
+
+
 def run(args: argparse.Namespace) -> int:
     """Start the editor and serve until Ctrl-C."""
     from arapkit.editor.app import EditorApp
@@ -157,6 +185,7 @@ def run(args: argparse.Namespace) -> int:
         port=args.port,
         export_dir=args.export_dir,
         max_upload_mb=args.max_upload_mb,
+        up=_up(getattr(args, "up", None)),
     )
     print(
         f"arapkit editor: {app.url}  (mesh {state.mesh.name}, {state.n} vertices; "

@@ -34,9 +34,12 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "info",
         help="describe a mesh and how the deformer would treat its problems",
         description="Print vertex/face counts, connected components, boundary loops, "
-        "degenerate and non-manifold elements of MESH, and what arapkit deform would do "
-        "about each.",
-        **add_example_epilog(["arapkit info cow.off", "arapkit info scan.ply.gz --json"]),
+        "degenerate and non-manifold elements of MESH, its bounding box and a guess of its up "
+        "axis (for writing handle files and reading figures), and what arapkit deform would "
+        "do about each problem.",
+        **add_example_epilog(
+            ["arapkit info examples/cactus.off", "arapkit info scan.ply.gz --json"]
+        ),
     )
     p.add_argument("mesh", metavar="MESH", help="mesh file (OFF, OBJ, PLY, STL; may be .gz)")
     p.add_argument("--json", action="store_true", help="print the facts as one JSON object")
@@ -73,9 +76,11 @@ def inspect_mesh(mesh) -> dict[str, Any]:
     """
     from arapkit.errors import InputError
     from arapkit.mesh import Mesh, check_number_range, scale_free_vertices
+    from arapkit.orientation import bounding_box, guess_up
     from arapkit.weights import cotangent_weights
     from arapkit.welding import soup_facts
 
+    box, up = bounding_box(mesh.vertices), guess_up(mesh.vertices)
     loops = mesh.boundary_loops
     labels = mesh.component_labels
     comp_sizes = np.bincount(labels, minlength=mesh.n_components)
@@ -106,6 +111,12 @@ def inspect_mesh(mesh) -> dict[str, Any]:
         "negative_cotan_weights": negative,
         **soup_facts(mesh),
         "bounding_box_diagonal": mesh.bounding_box_diagonal,
+        "bounding_box_min": box.min.tolist(),
+        "bounding_box_max": box.max.tolist(),
+        "extents": box.extents.tolist(),
+        "up_axis_guess": up.axis,
+        "up_axis_confidence": up.confidence,
+        "up_axis_reason": up.reason,
         "repairs_on_load": list(mesh.notes),
         "number_range": number_range,
     }
@@ -173,8 +184,12 @@ def run(args: argparse.Namespace) -> int:
     for key, value in facts.items():
         if key in ("advice", "repairs_on_load", "number_range"):
             continue
-        if isinstance(value, float):
+        if key == "up_axis_confidence":
+            value = f"{value:.2f}  (0 = a coin toss, 1 = certain; see docs/figures.md)"
+        elif isinstance(value, float):
             value = f"{value:.6g}"
+        elif isinstance(value, list) and all(isinstance(x, float) for x in value):
+            value = "[" + ", ".join(f"{x:.6g}" for x in value) + "]"
         print(f"{key.replace('_', ' ') + ':':<{width + 2}}{value}")
     print("what arapkit deform would do:")
     for line in facts["advice"]:

@@ -33,6 +33,7 @@ import numpy as np
 
 from arapkit.cli.common import (
     add_example_epilog,
+    add_view_options,
     add_weld_option,
     load_mesh_checked,
     positive_int,
@@ -43,11 +44,12 @@ from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 __all__ = ["Frames", "add_parser", "expand_frames", "load_frames", "parse_omega", "run"]
 
 EXAMPLES = [
-    "arapkit learn walk.npz -o rings.txt --figure rings.png",
+    "arapkit learn examples/finger-bend.npz -o rings.txt --figure rings.png",
     "arapkit learn 'poses/*.obj' -o rings.txt --ply rings.ply",
     "arapkit learn poses/ -o rings.txt --reference 2 --omega 0.3",
-    "arapkit learn walk.npz run.npz jump.npz -o rings.txt --scheduler tcp://10.0.0.5:8786",
-    "arapkit deform rest.obj --handles h.json --rings-file rings.txt -o out.ply",
+    "arapkit learn walk.npz run.npz jump.npz -o rings.txt --scheduler tcp://127.0.0.1:8786",
+    "arapkit deform examples/finger.off --handles examples/handles/rotate-limb.json "
+    "--rings-file rings.txt -o out.ply",
 ]
 _MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 _GLOB_CHARS = re.compile(r"[*?\[]")
@@ -104,7 +106,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--weights", default=DEFAULT_WEIGHTS, choices=kinds,
                    help=f"edge weights: {', '.join(kinds)} (default {DEFAULT_WEIGHTS})")
     p.add_argument("--figure", metavar="FILE",
-                   help="the reference coloured by r, r_min blue ... r_max red (.png, .pdf, .svg)")
+                   help="the reference coloured by r, 1 blue ... 6+ red, from the front and "
+                   "the back (.png, .pdf, .svg)")
+    add_view_options(p)
     p.add_argument("--ply", metavar="FILE", help="the reference as PLY with a 'rings' property")
     p.add_argument("--energies", metavar="FILE",
                    help="table E_ARAP(k, r), one row per vertex (.npy, or text otherwise)")
@@ -396,10 +400,17 @@ def _write(args, reference, res) -> None:
         from arapkit.learn import rings_figure
         from arapkit.plots import save_figure
 
-        title = (f"{reference.name}: learned r from {res.n_examples} examples, "
+        title = (f"{reference.name}: learned r from {_examples(res.n_examples)}, "
                  f"omega = {res.omega:.3g} ({res.omega_rule})")
+        # the default view gets its opposite too, so no part of the map stays hidden
+        views = ("front", "back") if args.view == "front" else (args.view,)
         save_figure(rings_figure(reference.vertices, reference.faces, res.rings, res.r_min,
-                                 res.r_max, title=title), args.figure, dpi=150)
+                                 res.r_max, title=title, views=views, up=args.up),
+                    args.figure, dpi=150)
+
+
+def _examples(n: int) -> str:
+    return "1 example" if n == 1 else f"{n} examples"
 
 
 def run(args: argparse.Namespace) -> int:
@@ -421,7 +432,7 @@ def run(args: argparse.Namespace) -> int:
     _write(args, reference, res)
     counts = ", ".join(f"{r}: {c}" for r, c in res.histogram().items())
     print(f"learned r for {len(res.rings)} vertices of {frames.names[ref]} from "
-          f"{res.n_examples} examples; omega = {res.omega:.4g} ({res.omega_rule})")
+          f"{_examples(res.n_examples)}; omega = {res.omega:.4g} ({res.omega_rule})")
     print(f"vertices per r: {counts}")
     print(f"wrote {args.output} in {time.perf_counter() - t0:.2f} s "
           f"(energies {res.timings['energy_s']:.2f} s)")

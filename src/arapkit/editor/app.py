@@ -56,7 +56,8 @@ VIEWS = ("Shaded", "Rigidity r", "Energy")
 METHODS = {"r-ring ARAP": "arap", "Laplacian editing": "laplacian",
            "spokes-and-rims ARAP": "spokes-and-rims", "SR-ARAP": "sr-arap",
            "embedded deformation": "embedded"}
-UP_AXES = {"+z": (0, 0, 1), "+y": (0, 1, 0), "+x": (1, 0, 0)}
+UP_AXES = {"+z": (0, 0, 1), "+y": (0, 1, 0), "+x": (1, 0, 0),
+           "-z": (0, 0, -1), "-y": (0, -1, 0), "-x": (-1, 0, 0)}
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
 MAX_R = 10
 HANDLE_RGB, FROZEN_RGB, ACTIVE_RGB, SELECT_RGB = (255, 140, 0), (110, 110, 135), (255, 235, 0), (
@@ -101,6 +102,8 @@ class EditorApp:
     export_dir : folder for exports and saved sessions (created on first use).
     max_upload_mb : size cap for meshes, rings and sessions uploaded from the page.
     verbose : let viser print its banner.
+    up : signed axis ('+y', '-z', ...) shown up; default: :func:`arapkit.guess_up` of each
+        mesh loaded (the same guess as ``arapkit info`` and the figures).
     """
 
     def __init__(
@@ -112,8 +115,13 @@ class EditorApp:
         export_dir: str | Path = "arapkit-edits",
         max_upload_mb: float = 64.0,
         verbose: bool = False,
+        up: str | None = None,
     ) -> None:
+        if up is not None and up not in UP_AXES:
+            raise InputError(f"up axis {up!r}: expected one of {', '.join(UP_AXES)}")
         self.state = state
+        self._up_override = up
+        self.up_reason = ""
         self.export_dir = Path(export_dir).expanduser().resolve()
         self.max_upload_bytes = int(max_upload_mb * 2**20)
         self.lock = threading.RLock()
@@ -192,6 +200,7 @@ class EditorApp:
                 color=SHADED_COLOR, side="double",
             )
             self._centre = (lo + hi) / 2
+            self._quietly(self._choose_up)
             self._aim_cameras()
             self.active = st.handles[-1].name if st.handles else None
             self._quietly(self._sync_gui_from_state)
@@ -199,11 +208,28 @@ class EditorApp:
             self.md_mesh.content = self._mesh_info()
         self.request_solve()
 
+    def _choose_up(self) -> None:
+        """Set the up axis of a newly loaded mesh: the override, else the shared guess."""
+        from arapkit.orientation import guess_up
+
+        if self._up_override is not None:
+            self.dd_up.value = self._up_override
+            self.up_reason = "set with --up"
+        else:
+            g = guess_up(self.state.vertices)
+            self.dd_up.value = g.axis
+            self.up_reason = f"guessed, confidence {g.confidence:.2f}"
+
     def _aim_cameras(self) -> None:
         """Look at the mesh from the front, slightly above, for the chosen up axis."""
+        from arapkit.orientation import view_frame
+
         up_name = self.dd_up.value
         up = np.array(UP_AXES[up_name], dtype=np.float64)
-        front = np.array([0.0, -1.0, 0.0]) if up_name == "+z" else np.array([0.0, 0.0, 1.0])
+        # the figures' front: along the thinner horizontal axis (row 2 points at the viewer)
+        front = view_frame(self.state.vertices, "front", up_name)[0][2]
+        front = front - (front @ up) * up
+        front /= np.linalg.norm(front)
         centre = self._centre
         eye = centre + self._diag * (0.9 * front + 0.55 * up + 0.15 * np.cross(up, front))
         # Aim a little right of the centre so the GUI panel (right side) hides less.
@@ -218,6 +244,19 @@ class EditorApp:
             client.camera.up_direction = tuple(up)
             client.camera.position = tuple(eye)
             client.camera.look_at = tuple(centre)
+        self._show_settings()
+
+    def _show_settings(self) -> None:
+        """One line in the panel: what the page shows and how it solves, at a glance."""
+        if not hasattr(self, "md_settings"):
+            return
+        s = self.state.settings
+        method = next((k for k, v in METHODS.items() if v == s.method), s.method)
+        why = f" ({self.up_reason})" if self.up_reason else ""
+        self.md_settings.content = (
+            f"View **{self.dd_view.value}**, up **{self.dd_up.value}**{why} · "
+            f"method **{method}** · weights **{s.weights}**"
+        )
 
     def _mesh_info(self) -> str:
         m = self.state.mesh
@@ -412,6 +451,7 @@ class EditorApp:
         gui = self.server.gui
         self.md_status = gui.add_markdown("Starting ...")
         self.md_mesh = gui.add_markdown("")
+        self.md_settings = gui.add_markdown("")
         with gui.add_folder("Tools"):
             self.dd_tool = gui.add_dropdown("Tool", TOOLS, initial_value="Select: click")
             self.sl_radius = gui.add_slider("Radius (% size)", 0.5, 30.0, 0.5, 3.0)
@@ -503,9 +543,9 @@ class EditorApp:
         self.bt_remove.on_click(ui(lambda e: self._remove_handle()))
         self.sl_global.on_update(ui(lambda e: self._set_global(self.sl_global.value)))
         self.up_rings.on_upload(ui(self._upload_rings))
-        self.dd_view.on_update(ui(lambda e: self._rebuild_display()))
+        self.dd_view.on_update(ui(lambda e: (self._rebuild_display(), self._show_settings())))
         self.cb_show_handles.on_update(ui(lambda e: self._draw_markers()))
-        self.dd_up.on_update(ui(lambda e: self._aim_cameras()))
+        self.dd_up.on_update(ui(lambda e: self._up_chosen()))
         for w in (self.dd_method, self.dd_weights, self.nb_tol, self.nb_maxit, self.nb_budget):
             w.on_update(ui(lambda e: self._apply_settings()))
         self.bt_solve.on_click(ui(lambda e: self.request_solve()))
@@ -618,7 +658,13 @@ class EditorApp:
         s.live_budget_ms = float(self.nb_budget.value)
         if s.method == "laplacian":
             self._vertex_energy = None
+        self._show_settings()
         self.request_solve()
+
+    def _up_chosen(self) -> None:
+        """The user picked an up axis in the panel: it holds until the next mesh loads."""
+        self.up_reason = "chosen in the panel"
+        self._aim_cameras()
 
     def _history(self, step: Callable[[], bool]) -> None:
         if step():

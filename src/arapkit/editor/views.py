@@ -1,5 +1,7 @@
 """Colour views of the editor: rigidity r (1 blue ... 6 red) and per-vertex energy.
 
+The colours come from :mod:`arapkit.colors`, the same as in the figures.
+
 viser meshes carry one colour each, so a coloured view is drawn as a few sub-meshes, one
 per colour bin, each with only the vertices its faces use.  During a drag only their
 vertex arrays are refreshed; the split is recomputed when the colours change.
@@ -19,15 +21,8 @@ import dataclasses
 
 import numpy as np
 
-#: r = 1 ... 6; larger r uses the last colour.  Blue (soft) to red (rigid).
-RING_COLORS: tuple[tuple[int, int, int], ...] = (
-    (45, 85, 230),
-    (0, 170, 225),
-    (40, 180, 90),
-    (235, 200, 40),
-    (245, 130, 30),
-    (220, 35, 35),
-)
+from arapkit.colors import ENERGY_CMAP, RING_COLORS
+
 ENERGY_BINS = 8
 SHADED_COLOR = (190, 195, 205)
 
@@ -63,10 +58,10 @@ def energy_labels(vertex_energy: np.ndarray, vmax: float, bins: int = ENERGY_BIN
 
 
 def energy_colors(bins: int = ENERGY_BINS) -> list[tuple[int, int, int]]:
-    """Bin colours from matplotlib's ``viridis`` (dark = low energy, yellow = high)."""
+    """Bin colours from :data:`arapkit.colors.ENERGY_CMAP` (pale = low energy, dark red = high)."""
     from matplotlib import colormaps
 
-    cmap = colormaps["viridis"]
+    cmap = colormaps[ENERGY_CMAP]
     return [
         tuple(int(255 * c) for c in cmap((k + 0.5) / bins)[:3])  # type: ignore[misc]
         for k in range(bins)
