@@ -126,7 +126,70 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument("--figure", metavar="FILE", help="summary figure (.png, .pdf or .svg)")
     p.add_argument("--force", action="store_true", help="allow overwriting an input file")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar or notes")
+    _add_volume_options(p)
     return p
+
+
+# -- volumetric ARAP (arapkit.volume) -------------------------------------------------
+
+
+def _add_volume_options(p: argparse.ArgumentParser) -> None:
+    """``--volumetric`` and its options: fill the closed surface with tetrahedra."""
+    g = p.add_argument_group("volumetric ARAP (needs pip install 'arapkit[volume]')")
+    g.add_argument(
+        "--volumetric",
+        action="store_true",
+        help="fill the closed surface with tetrahedra and solve ARAP on the volume (inner "
+        "edges against folding and volume loss); the output is still the input's surface",
+    )
+    g.add_argument(
+        "--interior-density",
+        type=positive_float,
+        default=None,
+        metavar="X",
+        help="interior tet edge length in multiples of the surface's mean edge length "
+        "(default: arapkit.volume.DEFAULT_DENSITY)",
+    )
+    g.add_argument(
+        "--save-volume",
+        metavar="FILE",
+        help="also write the deformed tet mesh (.vtu, .msh, .vtk or .mesh, via meshio)",
+    )
+
+
+def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None:
+    """Refuse volume options without --volumetric, a missing mesher, a bad volume path."""
+    from arapkit.fileio import check_output_path
+    from arapkit.volume import MESHER_HINT, VOLUME_FORMATS, have_mesher
+
+    if not args.volumetric:
+        for flag, value in (("--interior-density", args.interior_density),
+                            ("--save-volume", args.save_volume)):
+            if value is not None:
+                raise InputError(f"{flag} needs --volumetric")
+        return None
+    if not have_mesher():
+        raise InputError(MESHER_HINT)
+    if args.save_volume is None:
+        return None
+    check_output_path(args.save_volume, inputs, args.force, "volume")
+    if Path(args.save_volume).suffix.lower() not in VOLUME_FORMATS:
+        raise InputError(f"{args.save_volume}: unsupported volume format (use "
+                         f"{', '.join(VOLUME_FORMATS)})")
+    return Path(args.save_volume).resolve()
+
+
+def _volume_deformer(args: argparse.Namespace, mesh, hs, rings):
+    """The volumetric deformer for ``--volumetric`` (surface weights do not apply)."""
+    from arapkit.volume import DEFAULT_DENSITY, VolumetricDeformer
+
+    if args.weights != DEFAULT_WEIGHTS:
+        note(f"--weights {args.weights} applies to surface ARAP; the volume uses its own "
+             "positive tet weights", args.quiet)
+    density = DEFAULT_DENSITY if args.interior_density is None else args.interior_density
+    return VolumetricDeformer(mesh, hs.indices, rings=rings, density=density, tol=args.tol,
+                              max_iter=args.max_iter, init=args.init,
+                              accelerate=args.accelerate)
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -146,8 +209,12 @@ def _check_outputs(args: argparse.Namespace) -> None:
         if ext not in _FIGURE_FORMATS:
             raise InputError(f"{args.figure}: unsupported figure format (use .png, .pdf or .svg)")
         outs.append(Path(args.figure).resolve())
+    volume_out = _check_volume_options(args, inputs)
+    if volume_out is not None:
+        outs.append(volume_out)
     if len(set(outs)) != len(outs):
-        raise InputError(f"{args.output}: output, report and figure must be different files")
+        raise InputError(f"{args.output}: output, report, figure and volume must be "
+                         "different files")
 
 
 def _rings(args: argparse.Namespace, n_vertices: int) -> np.ndarray | int:
@@ -183,6 +250,8 @@ def _report(args, mesh, hs, rings, res, wall_s: float) -> dict[str, Any]:
             "max_iter": args.max_iter,
             "init": args.init,
             "accelerate": args.accelerate,
+            "volumetric": args.volumetric,
+            "interior_density": args.interior_density,
         },
         "handles": {
             "count": len(hs.indices),
@@ -217,7 +286,7 @@ def run(args: argparse.Namespace) -> int:
         note(f"{args.mesh}: {msg}", args.quiet)
     hs = load_handles(args.handles, mesh.vertices, args.transform)
     rings = _rings(args, mesh.n_vertices)
-    deformer = Deformer(
+    deformer = _volume_deformer(args, mesh, hs, rings) if args.volumetric else Deformer(
         mesh,
         hs.indices,
         rings=rings,
@@ -237,6 +306,8 @@ def run(args: argparse.Namespace) -> int:
             f"(relative decrease still >= {args.tol:g}; raise --max-iter)",
             args.quiet,
         )
+    if args.volumetric and args.save_volume:
+        deformer.save_volume(args.save_volume)
     wall = time.perf_counter() - t0
 
     r_full = np.broadcast_to(np.asarray(deformer.rings), (mesh.n_vertices,))
