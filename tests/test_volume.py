@@ -294,3 +294,10 @@ def test_thin_bar_at_fine_density_does_not_crash():
     m = bar()
     tm = tetrahedralise(m, density=0.5)
     assert np.array_equal(tm.vertices[: m.n_vertices], m.vertices)
+
+
+@needs_mesher
+def test_the_mesher_leaves_no_files_behind(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # fTetWild writes a debug surface into its working folder
+    tetrahedralise(bar(5.0, 1.0, 1.0, (10, 2, 2)))
+    assert list(tmp_path.iterdir()) == []

@@ -161,6 +161,7 @@ def _run_ftetwild(name: str, V: np.ndarray, F: np.ndarray, ela: float, eps: floa
     import io
     import subprocess
     import sys
+    import tempfile
 
     so = _ftetwild()
     if so is None:
@@ -169,8 +170,10 @@ def _run_ftetwild(name: str, V: np.ndarray, F: np.ndarray, ela: float, eps: floa
     np.savez(buf, V=np.ascontiguousarray(V, dtype=np.float64),
              F=np.ascontiguousarray(F, dtype=np.uint32), ela=ela, eps=eps, threads=threads)
     before = _children_cpu()
-    proc = subprocess.run([sys.executable, "-c", _CHILD, so], input=buf.getvalue(),
-                          capture_output=True, check=False)
+    # fTetWild writes a debug file (__tracked_surface.stl) into its working folder
+    with tempfile.TemporaryDirectory(prefix="arapkit-tetwild-") as scratch:
+        proc = subprocess.run([sys.executable, "-c", _CHILD, so], input=buf.getvalue(),
+                              capture_output=True, check=False, cwd=scratch)
     _run_ftetwild.cpu_seconds = _children_cpu() - before
     if proc.returncode != 0:
         why = (f"signal {-proc.returncode}" if proc.returncode < 0
