@@ -238,10 +238,14 @@ def test_cli_volumetric_writes_the_surface_and_the_volume(tmp_path, capsys):
     from arapkit.cli import main
 
     mesh, handles = _bar_files(tmp_path)
-    out, vtu = tmp_path / "out.off", tmp_path / "vol.vtu"
+    out, vtu, rep = tmp_path / "out.off", tmp_path / "vol.vtu", tmp_path / "r.json"
     rc = main(["deform", str(mesh), "--handles", str(handles), "--volumetric",
-               "--save-volume", str(vtu), "-o", str(out), "--quiet"])
+               "--save-volume", str(vtu), "-o", str(out), "--report", str(rep), "--quiet"])
     assert rc == 0, capsys.readouterr().err
+    report = json.loads(rep.read_text())
+    assert report["parameters"]["volumetric"] is True
+    assert report["timings"]["tetrahedralisation_ms"] > 0
+    assert report["result"]["max_handle_error"] <= 1e-9
     src, res = load_mesh(mesh), load_mesh(out)
     assert res.n_vertices == src.n_vertices
     np.testing.assert_array_equal(res.faces, src.faces)

@@ -179,6 +179,17 @@ def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None
     return Path(args.save_volume).resolve()
 
 
+def _volume_report(args: argparse.Namespace) -> dict[str, Any]:
+    """Report parameters of ``--volumetric`` (none for surface ARAP)."""
+    from arapkit.volume import DEFAULT_DENSITY, DEFAULT_VOLUME_WEIGHTS
+
+    if not args.volumetric:
+        return {}
+    density = DEFAULT_DENSITY if args.interior_density is None else args.interior_density
+    return {"volumetric": True, "interior_density": density,
+            "volume_weights": DEFAULT_VOLUME_WEIGHTS, "save_volume": args.save_volume}
+
+
 def _volume_deformer(args: argparse.Namespace, mesh, hs, rings):
     """The volumetric deformer for ``--volumetric`` (surface weights do not apply)."""
     from arapkit.volume import DEFAULT_DENSITY, VolumetricDeformer
@@ -250,8 +261,7 @@ def _report(args, mesh, hs, rings, res, wall_s: float) -> dict[str, Any]:
             "max_iter": args.max_iter,
             "init": args.init,
             "accelerate": args.accelerate,
-            "volumetric": args.volumetric,
-            "interior_density": args.interior_density,
+            **_volume_report(args),
         },
         "handles": {
             "count": len(hs.indices),
