@@ -192,11 +192,11 @@ def _volume_report(args: argparse.Namespace) -> dict[str, Any]:
 
 def _volume_deformer(args: argparse.Namespace, mesh, hs, rings):
     """The volumetric deformer for ``--volumetric`` (surface weights do not apply)."""
-    from arapkit.volume import DEFAULT_DENSITY, VolumetricDeformer
+    from arapkit.volume import DEFAULT_DENSITY, DEFAULT_VOLUME_WEIGHTS, VolumetricDeformer
 
     if args.weights != DEFAULT_WEIGHTS:
-        note(f"--weights {args.weights} applies to surface ARAP; the volume uses its own "
-             "positive tet weights", args.quiet)
+        note(f"--weights {args.weights} applies to surface ARAP; the volume's edges use "
+             f"'{DEFAULT_VOLUME_WEIGHTS}' weights (see docs/volumetric.md)", args.quiet)
     density = DEFAULT_DENSITY if args.interior_density is None else args.interior_density
     return VolumetricDeformer(mesh, hs.indices, rings=rings, density=density, tol=args.tol,
                               max_iter=args.max_iter, init=args.init,
