@@ -79,7 +79,7 @@ def test_tet_volume_weights_by_hand():
     assert w.tolist() == pytest.approx([1 / 3 / 4, 1 / 3 / 1, 1 / 3 / 5])
 
 
-def test_explicit_edge_weights_are_validated_and_used():
+def test_explicit_edge_weights_are_validated():
     m = bar()
     n_e = len(m.edges)
     assert np.array_equal(edge_weights(m, np.full(n_e, 2.5)), np.full(n_e, 2.5))
