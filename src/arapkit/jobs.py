@@ -72,6 +72,8 @@ class DeformJob:
         Merge vertices closer than this fraction of the bounding-box diagonal for the solve
         (:func:`arapkit.welding.weld`); handles, rings and the output refer to the input's
         own vertices.
+    volumetric, interior_density
+        Volumetric ARAP (:class:`arapkit.volume.VolumetricDeformer`) and its interior density.
     """
 
     mesh: str
@@ -88,6 +90,8 @@ class DeformJob:
     sr_alpha: float | None = None
     nodes: int | None = None
     weld: float | None = None
+    volumetric: bool = False
+    interior_density: float | None = None
 
     def input_files(self) -> list[str]:
         """The files this job reads."""
@@ -229,6 +233,7 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
         energy=job.energy,
         sr_alpha=job.sr_alpha,
         nodes=job.nodes,
+        **({"volumetric": True, "density": job.interior_density} if job.volumetric else {}),
     )
     for msg in deformer.notes:
         inputs.tell(msg)
@@ -251,6 +256,17 @@ def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[s
                            "rings": prepared.rings.astype(np.int32)},
         like=prepared.mesh,
     )
+
+
+def _volume_parameters(job: DeformJob) -> dict[str, Any]:
+    """Report parameters of a volumetric job (none for surface ARAP)."""
+    if not job.volumetric:
+        return {}
+    from .volume import DEFAULT_DENSITY, DEFAULT_VOLUME_WEIGHTS
+
+    density = DEFAULT_DENSITY if job.interior_density is None else job.interior_density
+    return {"volumetric": True, "interior_density": density,
+            "volume_weights": DEFAULT_VOLUME_WEIGHTS}
 
 
 def method_description(job: DeformJob) -> dict[str, Any]:
@@ -309,6 +325,7 @@ def job_report(
             "max_iter": job.max_iter,
             "init": job.init,
             "accelerate": job.accelerate,
+            **_volume_parameters(job),
         },
         "handles": {
             "count": len(hs.indices),

@@ -230,6 +230,8 @@ class ARAPProblem:
         t0 = time.perf_counter()
         kind = DEFAULT_WEIGHTS if weights is None else weights
         w = edge_weights(mesh, kind)
+        if not isinstance(kind, str):  # explicit per-edge weights: no kind to name
+            kind = None
         return cls._build(EdgeGraph.from_mesh(mesh), w, kind, handles, energy, rings,
                           free_components, reorder, energy_options, t0)
 

@@ -142,6 +142,14 @@ class Deformer:
         mesh's order and agree with ``reorder=False`` to round-off).
     device : {"cpu", "auto"}
         Where to solve. Only the CPU path exists; "cuda" raises :class:`InputError`.
+    volumetric : bool
+        Fill the closed surface with tetrahedra and solve r-ring ARAP on the volume's edge
+        graph (the course report's "inner edges"); the result is still the surface's. This
+        returns a :class:`arapkit.volume.VolumetricDeformer` (same interface; needs
+        ``pip install 'arapkit[volume]'``). The surface ``weights`` do not apply.
+    density : float, optional
+        With ``volumetric=True``: interior edge length in multiples of the surface's mean
+        edge length (default :data:`arapkit.volume.DEFAULT_DENSITY`).
 
     Examples
     --------
@@ -156,6 +164,23 @@ class Deformer:
     True
     """
 
+    def __new__(cls, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
+                volumetric: bool = False, density: float | None = None, **options):
+        if not volumetric:
+            if density is not None:
+                raise InputError("density is an option of volumetric=True")
+            return super().__new__(cls)
+        from .volume import DEFAULT_DENSITY, VolumetricDeformer
+
+        if options.get("energy", "rring") != "rring":
+            raise InputError(f"volumetric=True runs r-ring ARAP; energy "
+                             f"'{options['energy']}' is for surfaces")
+        for key in ("energy", "sr_alpha", "nodes"):
+            options.pop(key, None)
+        return VolumetricDeformer(mesh, handles, rings,
+                                  density=DEFAULT_DENSITY if density is None else density,
+                                  **options)
+
     def __init__(
         self,
         mesh: Mesh,
@@ -163,6 +188,8 @@ class Deformer:
         rings=1,
         weights: str = DEFAULT_WEIGHTS,
         *,
+        volumetric: bool = False,
+        density: float | None = None,
         energy: str = "rring",
         sr_alpha: float | None = None,
         nodes: int | None = None,

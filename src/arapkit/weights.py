@@ -16,6 +16,8 @@ Weight kinds
   stops with an :class:`~arapkit.errors.InputError` that names the remedy. Kept for the
   paper's experiments and for agreement with libigl.
 * ``"uniform"``: ``w_ij = 1``.
+* An array of per-edge weights aligned with ``mesh.edges`` (finite and > 0), for edge graphs
+  whose weights come from elsewhere (e.g. the tetrahedral weights of :mod:`arapkit.volume`).
 """
 
 from __future__ import annotations
@@ -79,21 +81,27 @@ def cotangent_weights(mesh: Mesh) -> np.ndarray:
     return np.bincount(opposite.ravel(), 0.5 * cots.ravel(), minlength=len(mesh.edges))
 
 
-def edge_weights(mesh: Mesh, kind: str = DEFAULT_WEIGHTS) -> np.ndarray:
+def edge_weights(mesh: Mesh, kind: str | np.ndarray = DEFAULT_WEIGHTS) -> np.ndarray:
     """Weight of every edge of ``mesh.edges`` for the given policy.
 
     Parameters
     ----------
     mesh : Mesh
-    kind : {"cotan", "cotan-clamped", "uniform"}
+    kind : {"cotan", "cotan-clamped", "uniform"} or (len(mesh.edges),) array
+        A policy name, or the weights themselves (checked: finite, > 0, one per edge).
 
     Examples
     --------
+    >>> import numpy as np
     >>> from arapkit.shapes import bar
     >>> w = edge_weights(bar(), "uniform")
     >>> bool((w == 1).all())
     True
+    >>> edge_weights(bar(), np.full(len(bar().edges), 2.0))[:2].tolist()
+    [2.0, 2.0]
     """
+    if not isinstance(kind, str):
+        return _given_weights(mesh, kind)
     if kind == "uniform":
         return np.ones(len(mesh.edges))
     if kind not in WEIGHT_KINDS:
@@ -102,6 +110,27 @@ def edge_weights(mesh: Mesh, kind: str = DEFAULT_WEIGHTS) -> np.ndarray:
     if kind == "cotan-clamped":
         floor = CLAMP_FRACTION * max(float(np.mean(np.abs(w))), 1e-300)
         w = np.maximum(w, floor)
+    return w
+
+
+def _given_weights(mesh: Mesh, w) -> np.ndarray:
+    """Validate explicit per-edge weights: one per edge of ``mesh.edges``, finite, > 0."""
+    try:
+        w = np.array(w, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{mesh.name}: weights must be a policy name or numbers") from None
+    if w.shape != (len(mesh.edges),):
+        raise InputError(
+            f"{mesh.name}: expected {len(mesh.edges)} edge weights (one per edge), got shape "
+            f"{w.shape}"
+        )
+    bad = np.flatnonzero(~(np.isfinite(w) & (w > 0)))
+    if len(bad):
+        i, j = mesh.edges[bad[0]]
+        raise InputError(
+            f"{mesh.name}: weight of edge {bad[0]} ({i}, {j}) is {w[bad[0]]!r}; explicit "
+            "weights must be finite and > 0"
+        )
     return w
 
 

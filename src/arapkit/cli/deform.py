@@ -155,6 +155,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     add_weld_option(p)
     p.add_argument("--force", action="store_true", help="allow overwriting an input file")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bar or notes")
+    _add_volume_options(p)
     return p
 
 
@@ -170,6 +171,55 @@ def _check_method(args: argparse.Namespace) -> dict[str, Any]:
                          "(only for the local/global descent methods)")
     args._method_options = options
     return {"energy": args.energy, "sr_alpha": args.sr_alpha, "nodes": args.nodes}
+
+
+# -- volumetric ARAP (arapkit.volume) -------------------------------------------------
+
+
+def _add_volume_options(p: argparse.ArgumentParser) -> None:
+    """``--volumetric`` and its options: fill the closed surface with tetrahedra."""
+    g = p.add_argument_group("volumetric ARAP (needs pip install 'arapkit[volume]')")
+    g.add_argument(
+        "--volumetric",
+        action="store_true",
+        help="fill the closed surface with tetrahedra and solve ARAP on the volume (inner "
+        "edges against folding and volume loss); the output is still the input's surface",
+    )
+    g.add_argument(
+        "--interior-density",
+        type=positive_float,
+        default=None,
+        metavar="X",
+        help="interior tet edge length in multiples of the surface's mean edge length "
+        "(default: arapkit.volume.DEFAULT_DENSITY)",
+    )
+    g.add_argument(
+        "--save-volume",
+        metavar="FILE",
+        help="also write the deformed tet mesh (.vtu, .msh, .vtk or .mesh, via meshio)",
+    )
+
+
+def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None:
+    """Refuse volume options without --volumetric, a missing mesher, a bad volume path."""
+    from arapkit.fileio import check_output_path
+    from arapkit.volume import MESHER_HINT, VOLUME_FORMATS, have_mesher
+
+    if not args.volumetric:
+        for flag, value in (("--interior-density", args.interior_density),
+                            ("--save-volume", args.save_volume)):
+            if value is not None:
+                raise InputError(f"{flag} needs --volumetric")
+        return None
+    if not have_mesher():
+        raise InputError(MESHER_HINT)
+    if args.save_volume is None:
+        return None
+    check_output_path(args.save_volume, inputs, args.force, "volume")
+    if Path(args.save_volume).suffix.lower() not in VOLUME_FORMATS:
+        raise InputError(f"{args.save_volume}: unsupported volume format (use "
+                         f"{', '.join(VOLUME_FORMATS)})")
+    return Path(args.save_volume).resolve()
 
 
 def _check_outputs(args: argparse.Namespace) -> None:
@@ -191,8 +241,12 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_output_path(args.figure, inputs, args.force, "figure")
         check_figure_format(args.figure)
         outs.append(Path(args.figure).resolve())
+    volume_out = _check_volume_options(args, inputs)
+    if volume_out is not None:
+        outs.append(volume_out)
     if len(set(outs)) != len(outs):
-        raise InputError(f"{outs[0]}: output, report and figure must be different files")
+        raise InputError(f"{outs[0]}: output, report, figure and volume must be different "
+                         "files")
 
 
 def _job(args: argparse.Namespace, method: dict[str, Any]):
@@ -211,6 +265,8 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
         init=args.init,
         accelerate=args.accelerate,
         weld=getattr(args, "weld", None),
+        volumetric=args.volumetric,
+        interior_density=args.interior_density,
         **method,
     )
 
@@ -228,6 +284,11 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         inputs = load_job_inputs(job, note=tell)
         return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings)
+    if args.volumetric and args.weights != DEFAULT_WEIGHTS:
+        from arapkit.volume import DEFAULT_VOLUME_WEIGHTS
+
+        note(f"--weights {args.weights} applies to surface ARAP; the volume's edges use "
+             f"'{DEFAULT_VOLUME_WEIGHTS}' weights (see docs/volumetric.md)", args.quiet)
     prepared = prepare_job(job, note=tell)
     mesh, hs = prepared.mesh, prepared.handles
     with Progress(disable=args.quiet) as progress:
@@ -238,6 +299,8 @@ def run(args: argparse.Namespace) -> int:
             f"(relative decrease still >= {args.tol:g}; raise --max-iter)",
             args.quiet,
         )
+    if args.volumetric and args.save_volume:
+        prepared.deformer.save_volume(args.save_volume)
     wall = time.perf_counter() - t0
 
     r_full = prepared.rings

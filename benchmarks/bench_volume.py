@@ -1,0 +1,156 @@
+"""Volumetric r-ring ARAP against surface ARAP on bends and twists (docs/benchmarks.md).
+
+For every case (handle files in ``benchmarks/volume/``; the bar is :func:`arapkit.shapes.bar`)
+it solves surface ARAP (``arapkit.Deformer``, default weights) and volumetric ARAP
+(:class:`arapkit.volume.VolumetricDeformer`) with the same handles and r, and prints:
+
+* self-intersecting faces of the deformed surface beyond those at rest (``tests/selfintersect``:
+  libigl's triangle-triangle test on AABB-overlapping, non-adjacent pairs);
+* the change of enclosed volume in percent;
+* the largest handle error over the bounding-box diagonal;
+* time: tetrahedralisation, factorisation, per iteration (global + local), total solve.
+
+``--timing`` instead times tetrahedralisation + factorisation + solve on bunny00 (37.7K
+vertices) for the interior densities given.
+
+Usage::
+
+    python benchmarks/bench_volume.py                      # all cases, default settings
+    python benchmarks/bench_volume.py --cases bar-twist --weights tet-volume uniform
+    python benchmarks/bench_volume.py --timing --density 3 6
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from arapkit import Deformer, load_mesh
+from arapkit.handles import load_handles
+from arapkit.shapes import bar, bar_bend
+from arapkit.volume import (
+    DEFAULT_DENSITY,
+    DEFAULT_VOLUME_WEIGHTS,
+    VOLUME_WEIGHTS,
+    VolumetricDeformer,
+    mesh_volume,
+    tetrahedralise,
+)
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "tests"))
+from selfintersect import self_intersecting_faces  # noqa: E402
+
+DATA = HERE.parents[1] / "shared" / "data" / "meshes"
+CASES = ("bar-bend", "thick-bar-bend", "bar-twist", "knot1-twist", "hand-bend", "elephant-bend",
+         "cow-bend")
+
+
+def case(name: str):
+    """(mesh, handles, targets) of a case."""
+    if name == "bar-bend":  # the paper's bar, bent into a half circle
+        m = bar()
+        h, t = bar_bend(m, 180)
+        return m, h, t
+    if name == "thick-bar-bend":  # 5 x 1 x 1, bent by 90 degrees
+        m = bar(5.0, 1.0, 1.0, (20, 4, 4))
+        h, t = bar_bend(m, 90)
+        return m, h, t
+    if name == "bar-twist":
+        m = bar()
+    else:
+        m = load_mesh(DATA / f"{name.split('-')[0]}.off")
+    hs = load_handles(HERE / "volume" / f"{name}.json", m.vertices)
+    return m, hs.indices, hs.targets
+
+
+def measure(mesh, handles, targets, res, rest_hits: int) -> dict:
+    """Quality figures of one result."""
+    V = res.vertices
+    v0 = mesh_volume(mesh.vertices, mesh.faces)
+    return {
+        "selfx": len(self_intersecting_faces(V, mesh.faces)) - rest_hits,
+        "dvol_pct": 100 * (mesh_volume(V, mesh.faces) - v0) / abs(v0),
+        "handle_err": float(np.abs(V[handles] - targets).max()) / mesh.bounding_box_diagonal,
+        "iters": res.iterations,
+        "factor_ms": res.timings["factorisation_ms"],
+        "iter_ms": res.timings["global_ms_per_iter"] + res.timings["local_ms_per_iter"],
+        "solve_s": res.timings["total_s"],
+        "tet_s": res.timings.get("tetrahedralisation_ms", 0.0) / 1e3,
+    }
+
+
+def row(label: str, m: dict) -> str:
+    return (f"  {label:<28} selfx {m['selfx']:>4}  dV {m['dvol_pct']:+7.2f} %  "
+            f"handles {m['handle_err']:.1e}  it {m['iters']:>4}  tet {m['tet_s']:5.1f} s  "
+            f"factor {m['factor_ms']:7.0f} ms  iter {m['iter_ms']:6.1f} ms  "
+            f"solve {m['solve_s']:6.2f} s")
+
+
+def run_cases(args) -> None:
+    for name in args.cases:
+        mesh, h, t = case(name)
+        rest = len(self_intersecting_faces(mesh.vertices, mesh.faces))
+        print(f"{name}: {mesh.n_vertices} vertices, {rest} self-intersecting faces at rest, "
+              f"r = {args.rings}", flush=True)
+        res = Deformer(mesh, h, rings=args.rings, max_iter=args.max_iter).solve(t, tol=args.tol)
+        print(row("surface", measure(mesh, h, t, res, rest)), flush=True)
+        for density in args.density:
+            tm = tetrahedralise(mesh, density)
+            for w in args.weights:
+                d = VolumetricDeformer(mesh, h, rings=args.rings, weights=w, tet=tm,
+                                       max_iter=args.max_iter)
+                res = d.solve(t, tol=args.tol)
+                label = f"volume {w} d={density:g} ({tm.n_vertices - tm.n_surface} in)"
+                print(row(label, measure(mesh, h, t, res, rest)), flush=True)
+
+
+def run_timing(args) -> None:
+    mesh = load_mesh(DATA / "bunny00.off")
+    lo = mesh.vertices[:, 1].min()
+    h = np.flatnonzero(mesh.vertices[:, 1] < lo + 0.1)
+    top = np.flatnonzero(mesh.vertices[:, 1] > mesh.vertices[:, 1].max() - 0.15)
+    h = np.concatenate([h, top])
+    t = mesh.vertices[h].copy()
+    t[-len(top):, 0] += 0.1
+    for density in args.density:
+        t0, c0 = time.perf_counter(), time.process_time()
+        d = VolumetricDeformer(mesh, h, rings=args.rings, density=density,
+                               max_iter=args.max_iter)
+        t1, c1 = time.perf_counter(), time.process_time()
+        res = d.solve(t, tol=args.tol)
+        t2, c2 = time.perf_counter(), time.process_time()
+        s = Deformer(mesh, h, rings=args.rings, max_iter=args.max_iter).solve(t, tol=args.tol)
+        ti = res.timings
+        print(f"bunny00 d={density:g}: {d.tet.n_vertices} tet vertices, {len(d.tet.tets)} tets; "
+              f"tetrahedralise {d.tet.seconds:.1f} s (CPU {d.tet.cpu_seconds:.1f} s), "
+              f"set-up total {t1 - t0:.1f} s, "
+              f"factorise {ti['factorisation_ms'] / 1e3:.1f} s, solve {t2 - t1:.1f} s "
+              f"({res.iterations} it, {ti['global_ms_per_iter'] + ti['local_ms_per_iter']:.0f}"
+              f" ms/it); all {t2 - t0:.1f} s. CPU: mesher {d.tet.cpu_seconds:.1f} s + "
+              f"set-up {c1 - c0:.1f} s + solve {c2 - c1:.1f} s = "
+              f"{d.tet.cpu_seconds + c2 - c0:.1f} s. Surface: "
+              f"{s.timings['global_ms_per_iter'] + s.timings['local_ms_per_iter']:.0f} ms/it, "
+              f"{s.iterations} it; load average {os.getloadavg()[0]:.1f}", flush=True)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--cases", nargs="+", default=list(CASES), choices=CASES)
+    p.add_argument("--weights", nargs="+", default=[DEFAULT_VOLUME_WEIGHTS], choices=VOLUME_WEIGHTS)
+    p.add_argument("--density", nargs="+", type=float, default=[DEFAULT_DENSITY])
+    p.add_argument("--rings", type=int, default=1)
+    p.add_argument("--tol", type=float, default=1e-3)
+    p.add_argument("--max-iter", type=int, default=1000)
+    p.add_argument("--timing", action="store_true")
+    args = p.parse_args()
+    run_timing(args) if args.timing else run_cases(args)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,303 @@
+"""Volumetric r-ring ARAP (arapkit.volume): exactness, rigidity, volume, refusals, output."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from arapkit import Deformer, Mesh
+from arapkit.errors import InputError
+from arapkit.shapes import bar, bar_bend
+from arapkit.volume import (
+    VOLUME_WEIGHTS,
+    VolumetricDeformer,
+    check_closed,
+    extend_rings,
+    have_mesher,
+    mesh_volume,
+    tet_cotangent_weights,
+    tet_volume_weights,
+    tetrahedralise,
+    volume_graph,
+)
+from arapkit.weights import edge_weights
+
+needs_mesher = pytest.mark.skipif(
+    not have_mesher(),
+    reason="the tetrahedral mesher is not installed (pip install 'arapkit[volume]')",
+)
+
+
+@pytest.fixture(scope="module")
+def thick():
+    """A 5 x 1 x 1 box bar (354 vertices) and its tetrahedralisation (made once)."""
+    if not have_mesher():
+        pytest.skip("the tetrahedral mesher is not installed (pip install 'arapkit[volume]')")
+    m = bar(5.0, 1.0, 1.0, (20, 4, 4))
+    return m, tetrahedralise(m, density=1.0)
+
+
+def _rotation(axis, degrees: float) -> np.ndarray:
+    """Rodrigues' rotation (independent of the handle code)."""
+    a = np.asarray(axis, float) / np.linalg.norm(axis)
+    t = np.radians(degrees)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + np.sin(t) * K + (1 - np.cos(t)) * K @ K
+
+
+# -- building blocks -----------------------------------------------------------------
+
+
+def test_tet_cotangent_weights_match_dihedral_formula():
+    """(1/6) l_kl cot(theta_kl) from dihedral angles, computed independently per edge."""
+    rng = np.random.default_rng(3)
+    V = rng.normal(size=(4, 3))
+    T = np.array([[0, 1, 2, 3]])
+    E = np.array([[i, j] for i in range(4) for j in range(i + 1, 4)])
+    w = tet_cotangent_weights(V, T, E)
+    for e, (i, j) in enumerate(E):
+        k, m = (v for v in range(4) if v not in (i, j))
+        axis = (V[m] - V[k]) / np.linalg.norm(V[m] - V[k])
+
+        def perp(p, k=k, axis=axis):
+            d = V[p] - V[k]
+            return d - (d @ axis) * axis
+
+        a, b = perp(i), perp(j)
+        theta = np.arccos(a @ b / np.linalg.norm(a) / np.linalg.norm(b))
+        expected = np.linalg.norm(V[m] - V[k]) / np.tan(theta) / 6.0
+        assert w[e] == pytest.approx(expected, rel=1e-9, abs=1e-12)
+
+
+def test_tet_volume_weights_by_hand():
+    V = np.array([[0, 0, 0], [2, 0, 0], [0, 1, 0], [0, 0, 1.0]])  # volume 1/3
+    E = np.array([[0, 1], [0, 2], [1, 2]])
+    w = tet_volume_weights(V, np.array([[0, 1, 2, 3]]), E)
+    assert w.tolist() == pytest.approx([1 / 3 / 4, 1 / 3 / 1, 1 / 3 / 5])
+
+
+def test_explicit_edge_weights_are_validated():
+    m = bar()
+    n_e = len(m.edges)
+    assert np.array_equal(edge_weights(m, np.full(n_e, 2.5)), np.full(n_e, 2.5))
+    for bad, what in ((np.ones(n_e - 1), "expected"), (np.r_[np.ones(n_e - 1), 0.0], "> 0"),
+                      (np.r_[np.ones(n_e - 1), np.nan], "> 0"), (-np.ones(n_e), "> 0")):
+        with pytest.raises(InputError, match=what):
+            edge_weights(m, bad)
+
+
+def test_deformer_takes_an_array_of_edge_weights():
+    m = bar()
+    h, t = bar_bend(m, 90)
+    a = Deformer(m, h, weights=np.ones(len(m.edges))).solve(t, max_iter=5)
+    b = Deformer(m, h, weights="uniform").solve(t, max_iter=5)
+    np.testing.assert_allclose(a.vertices, b.vertices, atol=1e-12)
+
+
+def test_extend_rings_takes_the_nearest_surface_vertex(thick):
+    m, tm = thick
+    r = np.arange(m.n_vertices) % 5 + 1
+    full = extend_rings(r, tm)
+    assert np.array_equal(full[: m.n_vertices], r)
+    for v in range(m.n_vertices, tm.n_vertices):  # brute-force nearest surface vertex
+        d = np.linalg.norm(m.vertices - tm.vertices[v], axis=1)
+        assert full[v] in r[d <= d.min() + 1e-12]
+
+
+@needs_mesher
+def test_tetrahedralise_keeps_the_surface_vertices(thick):
+    m, tm = thick
+    assert tm.n_surface == m.n_vertices
+    assert np.array_equal(tm.vertices[: m.n_vertices], m.vertices)
+    vol = tm.volumes()
+    assert (vol > 0).all()
+    assert vol.sum() == pytest.approx(mesh_volume(m.vertices, m.faces), rel=1e-9)
+    graph, w = volume_graph(m, tm)
+    assert (w > 0).all() and np.isfinite(w).all()
+    surface_edges = {tuple(e) for e in m.edges.tolist()}
+    assert surface_edges <= {tuple(e) for e in graph.edges.tolist()}
+
+
+# -- the deformer ----------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("weights", VOLUME_WEIGHTS)
+def test_rest_is_exact(thick, weights):
+    m, tm = thick
+    h, _ = bar_bend(m, 90)
+    d = VolumetricDeformer(m, h, rings=2, weights=weights, tet=tm)
+    res = d.solve(m.vertices[h], max_iter=20)
+    E = d.graph.edges
+    scale = float((d.w * np.sum((tm.vertices[E[:, 0]] - tm.vertices[E[:, 1]]) ** 2, 1)).sum())
+    assert abs(res.energy) <= 1e-12 * scale  # eq. (1) summed as quad + rest - 2 tr
+    assert np.abs(res.vertex_energy).max() <= 1e-24 * scale  # summed edge by edge
+    np.testing.assert_allclose(res.vertices, m.vertices, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(d.volume_vertices, tm.vertices, rtol=0, atol=1e-12)
+
+
+def test_rigid_motion_of_all_handles_moves_the_volume_rigidly(thick):
+    m, tm = thick
+    h, _ = bar_bend(m, 90)
+    R, t = _rotation([1, 2, 3], 70), np.array([0.3, -2.0, 1.0])
+    d = VolumetricDeformer(m, h, rings=1, tet=tm, accelerate=True)
+    res = d.solve(m.vertices[h] @ R.T + t, tol=1e-15, max_iter=3000)
+    scale = m.bounding_box_diagonal
+    np.testing.assert_allclose(res.vertices, m.vertices @ R.T + t, rtol=0, atol=1e-6 * scale)
+    np.testing.assert_allclose(d.volume_vertices, tm.vertices @ R.T + t, rtol=0,
+                               atol=1e-6 * scale)
+    assert res.energy <= 1e-12 * scale ** 2
+
+
+def test_volume_is_kept_on_a_bend_where_surface_arap_loses_it(thick):
+    m, tm = thick
+    h, t = bar_bend(m, 80)  # measured: surface ARAP -3.3 %, volumetric -0.8 %
+    v0 = mesh_volume(m.vertices, m.faces)
+    surf = Deformer(m, h).solve(t, tol=1e-5)
+    vol = VolumetricDeformer(m, h, tet=tm).solve(t, tol=1e-5)
+    loss_surface = 1 - mesh_volume(surf.vertices, m.faces) / v0
+    change_volume = mesh_volume(vol.vertices, m.faces) / v0 - 1
+    assert loss_surface > 0.03  # surface ARAP folds into the empty inside
+    assert abs(change_volume) < 0.01
+    assert np.abs(vol.vertices[h] - t).max() <= 1e-6 * m.bounding_box_diagonal
+
+
+def test_surface_output_keeps_vertex_count_and_faces(thick):
+    m, tm = thick
+    h, t = bar_bend(m, 60)
+    d = VolumetricDeformer(m, h, rings=np.where(m.vertices[:, 0] < 2.5, 1, 3), tet=tm)
+    res = d.solve(t)
+    assert res.vertices.shape == m.vertices.shape
+    assert res.rotations.shape == (m.n_vertices, 3, 3)
+    assert res.vertex_energy.shape == (m.n_vertices,)
+    assert d.rings.shape == (m.n_vertices,)
+    assert d.volume_vertices.shape == tm.vertices.shape
+    np.testing.assert_array_equal(res.vertices[h], t)
+
+
+def test_open_mesh_is_refused_in_one_line():
+    V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
+    m = Mesh(V, [[0, 1, 2], [0, 2, 3]], name="square.off")
+    with pytest.raises(InputError) as e:
+        VolumetricDeformer(m, [0])
+    msg = str(e.value)
+    assert "\n" not in msg and "square.off" in msg and "1 boundary loop" in msg
+    assert "4 boundary edges" in msg
+
+
+def test_nonmanifold_mesh_is_refused():
+    # two closed tetrahedra sharing the edge (0, 1): that edge has four faces, none has one
+    V = np.array([[0, 0, 0], [0, 0, 1], [1, 0, 0.5], [0.5, 1, 0.5], [-1, 0, 0.5],
+                  [-0.5, -1, 0.5]])
+    F = [[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2],
+         [0, 1, 4], [0, 5, 1], [0, 4, 5], [1, 5, 4]]
+    m = Mesh(V, F, name="pair.off")
+    assert m.n_nonmanifold_edges == 1 and not m.boundary_loops
+    with pytest.raises(InputError, match="pair.off: .* 1 edge\\(s\\) have more than two faces"):
+        check_closed(m)
+
+
+def test_open_real_mesh_is_refused(data_dir):
+    from arapkit import load_mesh
+
+    m = load_mesh(data_dir / "meshes" / "cylinder.off")
+    with pytest.raises(InputError, match=r"1 boundary loop\(s\) \(136 boundary edges\)"):
+        check_closed(m)
+
+
+# -- command line --------------------------------------------------------------------------
+
+
+def _bar_files(tmp_path: Path) -> tuple[Path, Path]:
+    from arapkit.fileio import save_mesh
+
+    m = bar(5.0, 1.0, 1.0, (20, 4, 4))
+    mesh = tmp_path / "thick.off"
+    save_mesh(mesh, m.vertices, m.faces)
+    handles = tmp_path / "bend.json"
+    handles.write_text(json.dumps([
+        {"name": "base", "box": {"min": [-1, -1, -1], "max": [0.01, 1, 1]}},
+        {"name": "tip", "box": {"min": [4.99, -1, -1], "max": [6, 1, 1]},
+         "rotate": {"axis": [0, 1, 0], "degrees": -60, "center": [5, 0, 0]},
+         "translate": [-0.5, 0, 1.5]},
+    ]))
+    return mesh, handles
+
+
+@needs_mesher
+def test_cli_volumetric_writes_the_surface_and_the_volume(tmp_path, capsys):
+    import meshio
+
+    from arapkit import load_mesh
+    from arapkit.cli import main
+
+    mesh, handles = _bar_files(tmp_path)
+    out, vtu, rep = tmp_path / "out.off", tmp_path / "vol.vtu", tmp_path / "r.json"
+    rc = main(["deform", str(mesh), "--handles", str(handles), "--volumetric",
+               "--save-volume", str(vtu), "-o", str(out), "--report", str(rep), "--quiet"])
+    assert rc == 0, capsys.readouterr().err
+    report = json.loads(rep.read_text())
+    assert report["parameters"]["volumetric"] is True
+    assert report["timings"]["tetrahedralisation_ms"] > 0
+    assert report["result"]["max_handle_error"] <= 1e-9
+    src, res = load_mesh(mesh), load_mesh(out)
+    assert res.n_vertices == src.n_vertices
+    np.testing.assert_array_equal(res.faces, src.faces)
+    vol = meshio.read(vtu)
+    assert vol.points.shape[0] >= src.n_vertices
+    assert vol.cells_dict["tetra"].shape[1] == 4
+    # the volume's first vertices are the deformed surface
+    np.testing.assert_allclose(vol.points[: src.n_vertices], res.vertices, atol=1e-6)
+
+
+def test_cli_volumetric_without_mesher_says_how_to_install(tmp_path, capsys, monkeypatch):
+    from arapkit import volume
+    from arapkit.cli import main
+
+    monkeypatch.setattr(volume, "_ftetwild", lambda: None)
+    mesh, handles = _bar_files(tmp_path)
+    rc = main(["deform", str(mesh), "--handles", str(handles), "--volumetric",
+               "-o", str(tmp_path / "out.off")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2
+    assert len(err.splitlines()) == 1 and "pip install 'arapkit[volume]'" in err
+    assert not (tmp_path / "out.off").exists()
+
+
+def test_cli_volumetric_refuses_an_open_mesh(tmp_path, capsys, data_dir):
+    from arapkit.cli import main
+
+    handles = tmp_path / "h.json"
+    handles.write_text(json.dumps([{"indices": [0]}]))
+    rc = main(["deform", str(data_dir / "meshes" / "cylinder.off"), "--handles", str(handles),
+               "--volumetric", "-o", str(tmp_path / "out.off")])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and len(err.splitlines()) == 1 and "boundary loop" in err
+
+
+@needs_mesher
+def test_a_failing_mesher_is_a_clean_error(tmp_path, monkeypatch):
+    from arapkit import volume
+
+    bogus = tmp_path / "PyfTetWildWrapper.so"
+    bogus.write_bytes(b"not a library")
+    monkeypatch.setattr(volume, "_ftetwild", lambda: str(bogus))
+    with pytest.raises(InputError, match=r"bar: the tetrahedral mesher \(fTetWild\) failed"):
+        tetrahedralise(bar(5.0, 1.0, 1.0, (10, 2, 2)))
+
+
+@needs_mesher
+def test_thin_bar_at_fine_density_does_not_crash():
+    # fTetWild crashed here when its envelope was close to the target edge length
+    m = bar()
+    tm = tetrahedralise(m, density=0.5)
+    assert np.array_equal(tm.vertices[: m.n_vertices], m.vertices)
+
+
+@needs_mesher
+def test_the_mesher_leaves_no_files_behind(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # fTetWild writes a debug surface into its working folder
+    tetrahedralise(bar(5.0, 1.0, 1.0, (10, 2, 2)))
+    assert list(tmp_path.iterdir()) == []
