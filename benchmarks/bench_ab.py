@@ -1,14 +1,20 @@
 """Per-iteration time of two arapkit source trees, interleaved (A/B on a shared machine).
 
-Each round runs a fresh process per tree (so each compiles and caches its own kernels) that
-solves the bunny drag of ``bench_arap.py`` at r = 1 and r = 3 for 20 iterations, several
-times, and reports its fastest repeat. Rounds alternate A, B, A, B ... so that load from
-other processes hits both alike; the summary is the minimum over rounds.
+Default: each round runs a fresh process per tree (each compiles and caches its own
+kernels) that solves the bunny drag of ``bench_arap.py`` at r = 1 and r = 3 for 20
+iterations, several times, and reports its fastest repeat. Rounds alternate A, B, A, B ...;
+the summary is the minimum over rounds.
+
+``--same-process``: tree A's package is copied as ``arapkit_a`` and both deformers run in
+one process, alternating 20-iteration blocks, so that load from other processes hits both
+within a fraction of a second (much steadier on a busy machine). Both must produce the same
+iterates; min and median over blocks are printed.
 
 Usage::
 
-    git worktree add /tmp/base <commit>        # or: git archive <commit> src | tar -x -C /tmp/base
+    git archive <commit> src | tar -x -C /tmp/base
     python benchmarks/bench_ab.py /tmp/base/src src --rounds 6
+    python benchmarks/bench_ab.py /tmp/base/src src --same-process --blocks 30
 """
 
 from __future__ import annotations
@@ -47,16 +53,60 @@ def child(repeats: int) -> None:
     print(json.dumps(out))
 
 
+def same_process(a: str, b: str, blocks: int) -> None:
+    """Both trees in one process (A imported as ``arapkit_a``), alternating blocks."""
+    import shutil
+    import tempfile
+
+    import numpy as np
+
+    tmp = Path(tempfile.mkdtemp())
+    shutil.copytree(Path(a) / "arapkit", tmp / "arapkit_a")
+    sys.path.insert(0, str(Path(b).resolve()))
+    sys.path.insert(0, str(tmp))
+    sys.path.insert(0, str(HERE))
+    from arapkit_a.solver import Deformer as DeformerA
+    from bench_arap import DATA, drag_problem
+
+    from arapkit import Deformer, load_mesh
+
+    m = load_mesh(DATA / "bunny00.off")
+    h, T = drag_problem(m)
+    print("| r | A min | B min | A median | B median | B / A (min) | B / A (median) |")
+    print("|---|---|---|---|---|---|---|")
+    for r in (1, 3):
+        ds = {"A": DeformerA(m, h, rings=r), "B": Deformer(m, h, rings=r)}
+        res = {k: d.solve(T, max_iter=20, tol=0) for k, d in ds.items()}  # compile, factorise
+        drift = np.abs(res["A"].vertices - res["B"].vertices).max()
+        assert drift < 1e-9 * m.bounding_box_diagonal, f"the trees disagree by {drift}"
+        t: dict[str, list[float]] = {"A": [], "B": []}
+        for i in range(blocks):
+            for k in ("A", "B") if i % 2 == 0 else ("B", "A"):
+                t0 = time.perf_counter()
+                ds[k].solve(T, max_iter=20, tol=0)
+                t[k].append(1e3 * (time.perf_counter() - t0) / 20)
+        mn = {k: min(v) for k, v in t.items()}
+        md = {k: float(np.median(v)) for k, v in t.items()}
+        print(f"| {r} | {mn['A']:.2f} | {mn['B']:.2f} | {md['A']:.2f} | {md['B']:.2f} | "
+              f"{mn['B'] / mn['A']:.3f} | {md['B'] / md['A']:.3f} |", flush=True)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("a", nargs="?", help="source folder A (holds the arapkit package)")
     ap.add_argument("b", nargs="?", help="source folder B")
     ap.add_argument("--rounds", type=int, default=6)
     ap.add_argument("--repeats", type=int, default=7)
+    ap.add_argument("--same-process", action="store_true",
+                    help="both trees in one process, alternating blocks")
+    ap.add_argument("--blocks", type=int, default=30, help="blocks per tree (--same-process)")
     ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args(argv)
     if a.child:
         child(a.repeats)
+        return
+    if a.same_process:
+        same_process(a.a, a.b, a.blocks)
         return
     runs: dict[str, list[dict]] = {a.a: [], a.b: []}
     for i in range(a.rounds):

@@ -249,6 +249,21 @@ def test_problem_from_graph_equals_mesh_solve():
     assert np.allclose(res.history, ref.history, rtol=1e-12, atol=0)
 
 
+def test_problem_with_rings_equals_a_fresh_build():
+    m = bar()
+    h, t = bar_bend(m, 90)
+    w = edge_weights(m)
+    rings = np.where(m.vertices[:, 0] > 3.5, 1, 4)
+    fresh = ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=rings).solve(
+        t, max_iter=10, tol=0)
+    p = ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=2)
+    p.solve(t, max_iter=2, tol=0)
+    res = p.with_rings(rings).solve(t, max_iter=10, tol=0)
+    assert np.abs(res.vertices - fresh.vertices).max() < 1e-12 * m.bounding_box_diagonal
+    with pytest.raises(InputError, match="vertex 0 has r = 0"):
+        p.with_rings(np.zeros(m.n_vertices, int))
+
+
 def test_problem_from_graph_tet_rigid():
     """A two-tet graph (no triangles) follows a rigid motion of three handles exactly."""
     V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]], dtype=float)

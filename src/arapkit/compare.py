@@ -150,8 +150,8 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
     --------
     >>> print(format_rows([{"method": "ARAP", "energy_kind": "rring", "iterations": 3,
     ...     "converged": True, "time_s": 0.5, "own_energy": 1.0, "folded_edge_fraction": 0.0,
-    ...     "volume_change": -0.01, "max_handle_error": 0.0}]).splitlines()[1])
-    ARAP            3  yes    0.50           1  0.000   -1.00     0
+    ...     "volume_change": -0.01, "max_handle_error": 0.0}]).splitlines()[1].split())
+    ['ARAP', '3', 'yes', '0.50', '1', '0.000', '-1.00', '0']
     """
     head = ["method", "iterations", "converged", "time s", "own energy", "folded %",
             "volume %", "handle err"]

@@ -311,6 +311,27 @@ class ARAPProblem:
         """The same graph and handles with another energy (e.g. a new rigidity map)."""
         return replace(self, energy=energy, timings={"neighbourhood_ms": build_ms})
 
+    def with_rings(self, rings) -> ARAPProblem:
+        """The same r-ring problem with a new rigidity map (int or one r per vertex).
+
+        Examples
+        --------
+        >>> from arapkit.shapes import bar
+        >>> p = ARAPProblem.from_mesh(bar(), [0]).with_rings(3)
+        >>> int(p.energy.rings.max())
+        3
+        """
+        from .energy import make_energy
+        from .rings import check_rings
+
+        if self.energy.name != "rring":
+            raise InputError(f"energy '{self.energy.name}' has no rigidity map")
+        t0 = time.perf_counter()
+        r = check_rings(rings, self.n_vertices)
+        en = make_energy("rring", self.graph, self.w, self.weights_kind, rings=r,
+                         perm=self.perm)
+        return self.with_energy(en, 1e3 * (time.perf_counter() - t0))
+
     # -- derived data ------------------------------------------------------------------
     @property
     def n_vertices(self) -> int:

@@ -30,19 +30,18 @@ Constraints and the Cholesky factor are in :mod:`arapkit.constraints`.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 
 import numpy as np
 
 from .backend import CPUBackend
 from .constraints import CholeskyFactor, anchor_components, check_handles, check_targets
-from .energy import ENERGIES, LOCAL_GLOBAL, make_energy
+from .energy import ENERGIES, LOCAL_GLOBAL
 from .errors import Advice, InputError
 from .loop import Result, local_global
 from .mesh import Mesh
 from .problem import ARAPProblem, bandwidth_order
-from .rings import Neighbourhoods, check_rings
+from .rings import Neighbourhoods
 from .weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
@@ -254,18 +253,13 @@ class Deformer:
     def set_rings(self, rings) -> None:
         """Use a new rigidity map (int or per-vertex); rebuilds neighbourhoods and the factor."""
         p = self.problem
-        if p is None:
+        if self.energy != "rring":
             if not np.all(np.asarray(rings) == 1):
                 raise InputError(f"energy '{self.energy}' has no rigidity map (rings must be 1)")
             return
-        r = check_rings(rings, p.n_vertices)
-        t0 = time.perf_counter()
-        en = make_energy(self.energy, p.graph, p.w, p.weights_kind, rings=r, perm=p.perm,
-                         **p.energy.options)
-        self.problem = p.with_energy(en)
+        self.problem = p.with_rings(rings)
         self.backend = CPUBackend(self.problem)
-        self.problem.timings["neighbourhood_ms"] = 1e3 * (time.perf_counter() - t0)
-        self._rings = r
+        self._rings = self.problem.energy.rings[self.problem.iperm]
         self._weight_notes = self._check_rest_is_minimum()
 
     def _check_rest_is_minimum(self) -> list[str]:
