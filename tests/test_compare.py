@@ -140,3 +140,24 @@ def test_compare_bad_options_exit_2(cow_drag, argv, fragment):
     lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("arapkit: error: ")]
     assert len(lines) == 1 and fragment in lines[0]
     assert not (d / "bad").exists()
+
+
+def test_compare_dry_run_counts_groups_and_solves_nothing(tmp_path):
+    """--dry-run: each group's vertex count (counted here from the box) and a groups figure;
+    no method runs, so no table and no meshes."""
+    root = os.path.join(os.path.dirname(__file__), "..", "examples")
+    mesh = load_mesh(os.path.join(root, "cactus.off"))
+    groups = json.load(open(os.path.join(root, "cactus.json")))
+    out = tmp_path / "cmp"
+    proc = cli("compare", os.path.join(root, "cactus.off"), "--handles",
+               os.path.join(root, "cactus.json"),
+               "-o", out, "--dry-run", "--view", "side")
+    assert proc.returncode == 0, proc.stderr
+    for g in groups:
+        if "box" not in g:
+            continue
+        lo, hi = np.array(g["box"]["min"]), np.array(g["box"]["max"])
+        count = int(np.all((mesh.vertices >= lo) & (mesh.vertices <= hi), axis=1).sum())
+        assert f"{g['name']}: {count} vertices" in proc.stdout
+    assert (out / "groups.png").stat().st_size > 10_000
+    assert not (out / "compare.csv").exists() and not list(out.glob("*.ply"))

@@ -20,7 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from .colors import ENERGY_CMAP
 from .mesh import Mesh
+from .orientation import view_frame
 from .quality import folded_edge_fraction, volume_change
 from .weights import DEFAULT_WEIGHTS
 
@@ -170,11 +172,16 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
 
 
 def comparison_figure(mesh: Mesh, runs: list[MethodRun], handles, targets=None,
-                      fixed_mask=None, title: str | None = None, ncols: int | None = None):
+                      fixed_mask=None, title: str | None = None, ncols: int | None = None,
+                      view: str = "front", up: str | None = None):
     """The rest shape and every method's result, one camera, handles marked (Figs. 9-12).
 
+    The camera is upright and set from the rest shape (``view``, ``up``: see
+    :func:`arapkit.orientation.view_frame`).
+
     Each deformed panel is coloured by the largest dihedral-angle change at each vertex
-    (degrees, 0-60), so that folds and creases stand out; handles are dots (dark: fixed,
+    (degrees, 0-60, pale to dark red like energy everywhere), so that folds and creases
+    stand out; handles are dots (dark: fixed,
     red: moved), their faces painted on the rest panel.
     """
     import matplotlib.pyplot as plt
@@ -187,7 +194,7 @@ def comparison_figure(mesh: Mesh, runs: list[MethodRun], handles, targets=None,
     fixed = np.zeros(len(h), bool) if fixed_mask is None else np.asarray(fixed_mask, bool)
     V, F = mesh.vertices, mesh.faces
     shapes = [V] + [r.result.vertices for r in runs]
-    basis = plots.view_basis(np.concatenate(shapes), right=plots._principal_axes(V)[0])
+    basis = view_frame(V, view, up)[0]
     n = len(shapes)
     ncols = ncols or min(n, 3)
     nrows = (n + ncols - 1) // ncols
@@ -210,7 +217,7 @@ def comparison_figure(mesh: Mesh, runs: list[MethodRun], handles, targets=None,
         E = mesh.edges[e]
         np.maximum.at(per_vertex, E[:, 0], change)
         np.maximum.at(per_vertex, E[:, 1], change)
-        plots.render_mesh(ax, P, F, per_vertex, basis=basis, cmap="viridis", norm=dnorm)
+        plots.render_mesh(ax, P, F, per_vertex, basis=basis, cmap=ENERGY_CMAP, norm=dnorm)
         # handles as dots (subsampled for large sets) on every panel
         plots._mark(ax, P[h[fixed]], basis, plots._FIXED_COLOR, "fixed")
         plots._mark(ax, P[h[~fixed]], basis, plots._MOVED_COLOR, "moved")
@@ -223,7 +230,7 @@ def comparison_figure(mesh: Mesh, runs: list[MethodRun], handles, targets=None,
         plots._frame(ax, xy)
     for ax in axes[n:]:
         ax.set_axis_off()
-    plots._colorbar(fig, list(axes[1:n]), dnorm, "viridis",
+    plots._colorbar(fig, list(axes[1:n]), dnorm, ENERGY_CMAP,
                     "dihedral-angle change (degrees, clipped at 60)")
     if title:
         fig.suptitle(title, fontsize=10)

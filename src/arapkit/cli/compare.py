@@ -17,10 +17,14 @@ from pathlib import Path
 from arapkit.cli.common import (
     Progress,
     add_example_epilog,
+    add_view_options,
+    add_weld_option,
     load_mesh_checked,
+    maybe_weld,
     note,
     positive_float,
     positive_int,
+    warn,
 )
 from arapkit.errors import InputError
 from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
@@ -61,6 +65,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    help="iteration cap per method (default 1000)")
     p.add_argument("-o", "--out", required=True, metavar="DIR",
                    help="output folder (created if missing)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="no solve: print each handle group's vertex count and motion and draw "
+                   "the groups on the rest shape (DIR/groups.png)")
+    add_view_options(p)
+    add_weld_option(p)
     p.add_argument("--quiet", "-q", action="store_true", help="no progress bars or notes")
     return p
 
@@ -103,11 +112,19 @@ def run(args: argparse.Namespace) -> int:
     check_method("sr-arap", args.sr_alpha)
     check_method("embedded", None, args.nodes)
     out = _prepare_out(args.out, [args.mesh, args.handles, args.transform, args.rings_file])
-    mesh = load_mesh_checked(args.mesh)
-    for msg in mesh.notes:
+    source = load_mesh_checked(args.mesh)
+    mesh = maybe_weld(source, args.weld)
+    for msg in mesh.notes if mesh is source else source.notes + mesh.notes:
         note(f"{args.mesh}: {msg}", args.quiet)
-    hs = load_handles(args.handles, mesh.vertices, args.transform)
-    rings_map = load_rings(args.rings_file, mesh.n_vertices) if args.rings_file else None
+    hs = load_handles(args.handles, source.vertices, args.transform)
+    rings_map = load_rings(args.rings_file, source.n_vertices) if args.rings_file else None
+    if mesh is not source:
+        from arapkit.welding import weld_handle_set, weld_values
+
+        hs = weld_handle_set(mesh, hs)
+        rings_map = None if rings_map is None else weld_values(mesh, rings_map)
+    if args.dry_run:
+        return _dry_run(args, mesh, hs, out)
 
     def progress(label: str) -> Progress:
         return Progress(disable=args.quiet, desc=label)
@@ -122,16 +139,34 @@ def run(args: argparse.Namespace) -> int:
         if not r.result.converged:
             note(f"{r.label}: stopped after {r.result.iterations} iterations without "
                  "converging (raise --max-iter)", args.quiet)
-        save_mesh(out / f"{_slug(r.label)}.ply", r.result.vertices, mesh.faces,
-                  {"energy": r.result.vertex_energy})
+        for line in save_mesh(out / f"{_slug(r.label)}.ply", r.result.vertices,
+                              vertex_properties={"energy": r.result.vertex_energy}, like=mesh):
+            warn(line)
     rows = comparison_rows(runs)
     write_csv(out / "compare.csv", rows)
     fig = comparison_figure(mesh, runs, hs.indices, hs.targets, hs.fixed_mask,
                             title=f"{Path(args.mesh).name}: {mesh.n_vertices} vertices, "
-                            f"{len(hs.indices)} handles")
+                            f"{len(hs.indices)} handles", view=args.view, up=args.up)
     save_figure(fig, out / "compare.png")
     print(format_rows(rows))
     print("self-intersecting faces: not counted (no dependency of arapkit counts them)")
     print(f"wrote compare.png, compare.csv and {len(runs)} meshes to {out} "
           f"in {time.perf_counter() - t0:.1f} s")
+    return 0
+
+
+def _dry_run(args: argparse.Namespace, mesh, hs, out: Path) -> int:
+    """What ``deform --dry-run`` shows, for the comparison's handles; solves nothing."""
+    from arapkit.cli.deform import describe_groups
+    from arapkit.plots import groups_figure, save_figure
+
+    print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices)")
+    print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
+    for line in describe_groups(mesh.vertices, hs):
+        print(f"  {line}")
+    fig = groups_figure(mesh.vertices, mesh.faces, [(g.name, g.indices) for g in hs.groups],
+                        view=args.view, up=args.up,
+                        title=f"{Path(args.handles).name} on {Path(args.mesh).name}")
+    save_figure(fig, out / "groups.png")
+    print(f"dry run: nothing solved; wrote {out / 'groups.png'}")
     return 0

@@ -198,7 +198,7 @@ def run(args: argparse.Namespace) -> int:
     camera = {"view": args.view, "up": args.up}
     figures = _figures(out, mesh, handles, targets, rings_list, results, soft_hard, mixed, plots,
                        camera)
-    comparison = _comparison(out, mesh, handles, targets, soft_hard, plots)
+    comparison = _comparison(out, mesh, handles, targets, soft_hard, plots, camera)
     figures.append("compare.png")
     report = {
         "mesh": {"name": "bar", "vertices": mesh.n_vertices, "faces": mesh.n_faces},
@@ -235,7 +235,8 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
-def _comparison(out: Path, mesh, handles, targets, soft_hard, plots) -> list[dict[str, Any]]:
+def _comparison(out: Path, mesh, handles, targets, soft_hard, plots,
+                camera: dict[str, Any]) -> list[dict[str, Any]]:
     """ARAP, SR-ARAP, embedded deformation, r = 4 and the two-material map on one bend."""
     from arapkit.compare import comparison_figure, comparison_rows, run_comparison, write_csv
 
@@ -244,7 +245,7 @@ def _comparison(out: Path, mesh, handles, targets, soft_hard, plots) -> list[dic
     write_csv(out / "compare.csv", rows)
     fixed = np.all(targets == mesh.vertices[handles], axis=1)
     fig = comparison_figure(mesh, runs, handles, targets, fixed,
-                            title="bar bent 180 degrees: methods side by side")
+                            title="bar bent 180 degrees: methods side by side", **camera)
     plots.save_figure(fig, out / "compare.png")
     return rows
 
