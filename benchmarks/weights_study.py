@@ -101,13 +101,25 @@ def fold_fraction(mesh: Mesh, X: np.ndarray, degrees: float = 60.0) -> float:
     return float(turned.sum()) / len(mesh.edges)
 
 
-def study(path: Path, ring_sizes=range(1, 7), drags=(1, 3), max_iter=300) -> list[dict]:
+def available_kinds() -> tuple[str, ...]:
+    """The weightings this machine can run (intrinsic needs ``pip install robust-laplacian``)."""
+    try:
+        import robust_laplacian  # noqa: F401
+    except ImportError:
+        print("note: robust-laplacian is not installed; intrinsic weights are skipped",
+              file=sys.stderr)
+        return tuple(k for k in KINDS if k != "intrinsic")
+    return KINDS
+
+
+def study(path: Path, ring_sizes=range(1, 7), drags=(1, 3), max_iter=300,
+          kinds: tuple[str, ...] = KINDS) -> list[dict]:
     mesh = load_mesh(path)
     hs = load_handles(HANDLES / f"{path.name.split('.')[0]}.json", mesh.vertices)
     h, T = hs.indices, hs.targets
     diag = mesh.bounding_box_diagonal
     rows, shapes = [], {}
-    for kind in KINDS:
+    for kind in kinds:
         t0 = time.perf_counter()
         graph = intrinsic_graph(mesh) if kind == "intrinsic" else None
         w = graph[1] if graph else edge_weights(mesh, kind)
@@ -177,9 +189,11 @@ def main(argv: list[str]) -> int:
         print(f"skipped: {MESHES} not found")
         return 0
     paths = [MESHES / a for a in argv] or sorted(MESHES.iterdir())
+    kinds = available_kinds()
     for p in paths:
         big = p.name.startswith("dragon")
         kw = {"ring_sizes": (1,), "drags": (1,), "max_iter": 100} if big else {}
+        kw["kinds"] = kinds
         for row in study(p, **kw):
             print(json.dumps(row), flush=True)
     return 0
