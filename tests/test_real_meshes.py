@@ -200,3 +200,26 @@ def test_editor_first_solve_keeps_an_obtuse_mesh_in_shape():
     raw = [u for u in updates if u.final][-1]
     assert np.abs(raw.vertices - mesh.vertices).max() > 1e-2 * mesh.bounding_box_diagonal
     assert any("Solver panel" in n for n in raw.notes)
+
+
+def test_eyes_and_teeth_follow_the_head():
+    """The MakeHuman body has eyes and teeth as separate components without handles: by
+    default they move rigidly with the head (here translated by 0.15), not left behind."""
+    from arapkit import Mesh
+
+    data = np.load(data_path("sequences", "anny_makehuman_pose_seq.npz"))
+    mesh = Mesh(data["V"][0], data["F"])
+    V, labels = mesh.vertices, mesh.component_labels
+    assert mesh.n_components == 4
+    feet = np.flatnonzero(V[:, 2] < -0.8)
+    head = np.flatnonzero((V[:, 2] > 0.70) & (labels == labels[feet[0]]))
+    h = np.r_[feet, head]
+    T = V[h].copy()
+    T[len(feet):] += [0.15, 0, 0]
+    res = Deformer(mesh, h).solve(T)
+    left = Deformer(mesh, h, free_components="fix").solve(T)
+    for c in set(range(4)) - {labels[feet[0]]}:
+        part = labels == c
+        moved = (res.vertices[part] - V[part]).mean(axis=0)
+        assert abs(moved[0] - 0.15) < 0.01 and np.abs(moved[1:]).max() < 0.01, (c, moved)
+        assert np.array_equal(left.vertices[part], V[part])

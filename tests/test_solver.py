@@ -196,12 +196,28 @@ def test_component_without_handle():
     F = np.vstack([a.faces, a.faces + a.n_vertices])
     m = Mesh(V, F, name="two")
     h, t = bar_bend(a, 90)
-    d = Deformer(m, h)
+    d = Deformer(m, h, free_components="fix")
     assert any("without a handle" in n and f"vertex {a.n_vertices}" in n for n in d.notes)
     res = d.solve(t)
     assert np.array_equal(res.vertices[a.n_vertices:], V[a.n_vertices:])
     with pytest.raises(InputError, match=f"1 connected component.*vertex {a.n_vertices}"):
         Deformer(m, h, free_components="error")
+    # the default: the free bar moves rigidly with its neighbours; same solve otherwise
+    f = Deformer(m, h)
+    assert any("move rigidly with the nearest part" in n for n in f.notes)
+    follow = f.solve(t)
+    n = a.n_vertices
+    assert follow.history == res.history
+    np.testing.assert_array_equal(follow.vertices[:n], res.vertices[:n])
+    B0, B1 = V[n:], follow.vertices[n:]
+    D0 = np.linalg.norm(B0[:, None] - B0[None], axis=2)
+    D1 = np.linalg.norm(B1[:, None] - B1[None], axis=2)
+    assert np.abs(D1 - D0).max() < 1e-9  # rigid
+    assert np.abs(B1 - B0).max() > 0.1  # and moved with the bent bar
+    # its rotation is the one reported for every vertex of it
+    R = follow.rotations[n:]
+    assert np.abs(R - R[0]).max() < 1e-12
+    np.testing.assert_allclose((B0 - B0.mean(0)) @ R[0].T, B1 - B1.mean(0), atol=1e-9)
 
 
 def test_bad_handles_and_targets():

@@ -84,15 +84,23 @@ def check_targets(handles: np.ndarray, targets, name: str = "targets") -> np.nda
     return T
 
 
-def anchor_components(mesh: Mesh | EdgeGraph, handles: np.ndarray, policy: str = "fix"):
+#: what to do with a connected component that holds no handle (the first is the default)
+FREE_COMPONENT_POLICIES = ("follow", "fix", "error")
+
+
+def anchor_components(mesh: Mesh | EdgeGraph, handles: np.ndarray, policy: str = "follow"):
     """Vertices that must be held fixed because their component has no handle.
 
-    Without a handle such a component can translate freely and the system is singular.
+    Without a handle such a component can translate freely and the system is singular, so
+    its vertices are taken out of the solve. Its energy is 0 under any rigid motion, so
+    every rigid placement is an equally good minimiser; the policy picks one.
 
     Parameters
     ----------
-    policy : {"fix", "error"}
-        ``"fix"`` keeps those components at rest; ``"error"`` refuses.
+    policy : {"follow", "fix", "error"}
+        ``"follow"`` (default) moves each such component afterwards by the rigid motion of
+        the nearest part that has handles (:func:`follow_rigidly`: a character's eyes and
+        teeth stay in its head); ``"fix"`` keeps them at rest; ``"error"`` refuses.
 
     Returns
     -------
@@ -125,10 +133,61 @@ def anchor_components(mesh: Mesh | EdgeGraph, handles: np.ndarray, policy: str =
     )
     if policy == "error":
         raise InputError(f"{mesh.name}: {desc}; add a handle there or use free_components='fix'")
-    if policy != "fix":
-        raise InputError(f"unknown free_components policy '{policy}' (use 'fix' or 'error')")
+    if policy not in FREE_COMPONENT_POLICIES:
+        raise InputError(f"unknown free_components policy '{policy}' (use "
+                         f"{', '.join(repr(p) for p in FREE_COMPONENT_POLICIES)})")
     fixed = np.flatnonzero(~anchored[labels]).astype(np.int64)
-    return fixed, [f"{desc} are held fixed at rest"]
+    what = ("move rigidly with the nearest part that has handles (isolated vertices stay at "
+            "rest)" if policy == "follow" else "are held fixed at rest")
+    return fixed, [f"{desc} {what}"]
+
+
+def follow_rigidly(mesh: Mesh | EdgeGraph, free: np.ndarray, deformed: np.ndarray,
+                   rotations: np.ndarray | None = None, k: int = 32) -> None:
+    """Move each component of ``free`` by the rigid motion of its nearest anchored vertices.
+
+    For a component C without handles, the anchored vertices nearest to C at rest (the
+    nearest one of each vertex of C, and the ``k`` nearest its centroid) are fitted by the
+    best rigid motion rest -> ``deformed`` (Kabsch), which is then applied to C in place;
+    ``rotations`` of C's vertices are set to it. Single vertices stay where they are. C's
+    own energy is 0 before and after, so the solution stays a minimiser.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from arapkit import Mesh
+    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 2], [1, 0, 2], [0, 1, 2]], float)
+    >>> m = Mesh(V, [[0, 1, 2], [3, 4, 5]])
+    >>> P = V.copy(); P[:3] += [5, 0, 0]           # the handled triangle moved by +5 x
+    >>> follow_rigidly(m, np.array([3, 4, 5]), P)
+    >>> np.round(P[3:] - V[3:], 9).tolist()
+    [[5.0, 0.0, 0.0], [5.0, 0.0, 0.0], [5.0, 0.0, 0.0]]
+    """
+    from scipy.spatial import cKDTree
+
+    V = np.asarray(mesh.vertices)
+    labels = mesh.component_labels
+    is_free = np.zeros(len(V), dtype=bool)
+    is_free[free] = True
+    anchored = np.flatnonzero(~is_free)
+    if len(anchored) == 0:
+        return
+    tree = cKDTree(V[anchored])
+    for c in np.unique(labels[free]):
+        members = np.flatnonzero(labels == c)
+        if len(members) < 2:
+            continue
+        near = tree.query(V[members], k=1)[1]
+        centre = tree.query(V[members].mean(axis=0), k=min(k, len(anchored)))[1]
+        a = anchored[np.unique(np.concatenate([np.ravel(near), np.ravel(centre)]))]
+        src, dst = V[a], deformed[a]
+        ms, md = src.mean(axis=0), dst.mean(axis=0)
+        U, _, Vt = np.linalg.svd((src - ms).T @ (dst - md))
+        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+        R = Vt.T @ D @ U.T
+        deformed[members] = (V[members] - ms) @ R.T + md
+        if rotations is not None:
+            rotations[members] = R
 
 
 def _flush_c_stdio() -> None:

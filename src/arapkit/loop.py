@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .accel import Anderson
+from .constraints import follow_rigidly
 
 __all__ = ["Result", "local_global"]
 
@@ -170,4 +171,9 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
     else:  # max_iter = 0: the energy of the start itself
         ve = vertex_energy()
         energy, vertex_energy = float(ve.sum()), ve
-    return Result(P[inv], energy, hist, it, converged, R[inv], timings, vertex_energy)
+    V, Rv = P[inv], R[inv]
+    if problem.free_components == "follow" and len(problem.fixed_extra):
+        # components without handles: energy 0 at rest and under any rigid motion; place
+        # them with their neighbours rather than leave them behind
+        follow_rigidly(problem.caller_graph, problem.fixed_extra, V, Rv)
+    return Result(V, energy, hist, it, converged, Rv, timings, vertex_energy)

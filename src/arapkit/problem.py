@@ -191,14 +191,14 @@ class ARAPProblem:
     handles: np.ndarray
     fixed_extra: np.ndarray
     notes: list[str]
-    free_components: str = "fix"
+    free_components: str = "follow"
     caller_graph: EdgeGraph | None = field(default=None, repr=False)
     timings: dict[str, float] = field(default_factory=dict, repr=False)
 
     # -- construction --------------------------------------------------------------
     @classmethod
     def from_mesh(cls, mesh: Mesh, handles, energy="rring", weights: str | None = None, *,
-                  rings=1, free_components: str = "fix", reorder: bool = True,
+                  rings=1, free_components: str = "follow", reorder: bool = True,
                   **energy_options) -> ARAPProblem:
         """Precompute ARAP on a triangle mesh.
 
@@ -237,7 +237,7 @@ class ARAPProblem:
 
     @classmethod
     def from_graph(cls, vertices, edges, weights, handles, *, rings=1, name: str = "graph",
-                   free_components: str = "fix", reorder: bool = True) -> ARAPProblem:
+                   free_components: str = "follow", reorder: bool = True) -> ARAPProblem:
         """Precompute r-ring ARAP on a plain edge graph (e.g. a tetrahedral mesh's edges).
 
         The energy is eq. (1) of Chen et al. 2017 on the given edges, which is defined on any

@@ -126,7 +126,7 @@ class Deformer:
         Iteration cap.
     init : {"identity", "laplacian"}
         Start from identity rotations (the paper) or from Laplacian editing (the report).
-    free_components : {"fix", "error"}
+    free_components : {"follow", "fix", "error"}
         What to do with connected components that hold no handle.
     accelerate : bool
         Anderson acceleration (Peng et al. 2018) of the local/global iteration with an
@@ -195,7 +195,7 @@ class Deformer:
         tol: float = 1e-3,
         max_iter: int = 1000,
         init: str = "identity",
-        free_components: str = "fix",
+        free_components: str = "follow",
         accelerate: bool = False,
         history: int = 5,
         reorder: bool = True,

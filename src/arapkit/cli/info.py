@@ -141,8 +141,8 @@ def _advice(f: dict[str, Any]) -> list[str]:
         )
     if f["components"] > 1:
         out.append(
-            f"{f['components']} connected components: each component without a handle is "
-            "held fixed at rest (free_components='fix')"
+            f"{f['components']} connected components: each component without a handle moves "
+            "rigidly with the nearest part that has handles"
         )
     if f["boundary_loops"]:
         out.append(
