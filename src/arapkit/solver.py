@@ -22,6 +22,7 @@ energy never increases.
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -43,6 +44,14 @@ from .rings import (
     neighbourhoods_from_arrays,
 )
 from .rotations import fit_rotation_range
+from .validate import (
+    handle_indices,
+    integer,
+    iteration_cap,
+    real_array,
+    target_positions,
+    tolerance,
+)
 from .weights import DEFAULT_WEIGHTS, edge_weights
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "laplacian_matrix"]
@@ -209,43 +218,51 @@ def neighbourhood_energies(P, P0, edges, w, edge_ptr, edge_idx, R, out):
 def check_handles(mesh: Mesh, handles) -> np.ndarray:
     """Validate handle vertex indices (integers, unique, in range) and return them as int64.
 
+    A boolean array of one value per vertex is read as a mask. The rule is
+    :func:`arapkit.validate.handle_indices`.
+
     Examples
     --------
     >>> from arapkit.shapes import bar
     >>> check_handles(bar(), [0, 5]).tolist()
     [0, 5]
     """
-    h = np.asarray(handles)
-    if h.ndim != 1:
-        h = h.reshape(-1)
-    if len(h) == 0:
-        raise InputError(f"{mesh.name}: no handle vertices given")
-    if not np.issubdtype(h.dtype, np.integer):
-        hf = np.asarray(h, dtype=np.float64)
-        if not np.all(hf == np.round(hf)):
-            raise InputError(f"{mesh.name}: handle indices must be integers")
-    h = h.astype(np.int64)
-    bad = np.flatnonzero((h < 0) | (h >= mesh.n_vertices))
-    if len(bad):
-        raise InputError(
-            f"{mesh.name}: handle {bad[0]} is vertex {h[bad[0]]}, out of range "
-            f"(mesh has {mesh.n_vertices} vertices)"
-        )
-    uniq, counts = np.unique(h, return_counts=True)
-    if (counts > 1).any():
-        raise InputError(f"{mesh.name}: vertex {uniq[counts > 1][0]} is listed twice as a handle")
-    return h
+    return handle_indices(handles, mesh.n_vertices, mesh.name)
 
 
 def check_targets(handles: np.ndarray, targets, name: str = "targets") -> np.ndarray:
-    """Validate handle targets: shape (len(handles), 3), finite."""
-    T = np.asarray(targets, dtype=np.float64)
-    if T.shape != (len(handles), 3):
-        raise InputError(f"{name}: expected shape ({len(handles)}, 3), got {T.shape}")
-    bad = np.flatnonzero(~np.isfinite(T).all(axis=1))
-    if len(bad):
-        raise InputError(f"{name}: handle {bad[0]} (vertex {handles[bad[0]]}) target is not finite")
-    return T
+    """Validate handle targets: real, shape (len(handles), 3), finite."""
+    return target_positions(handles, targets, name)
+
+
+def unit_scale(vertices: np.ndarray, name: str) -> float:
+    """The power of two ``s`` with ``extent / s`` in [0.5, 1): the solver works in ``V / s``.
+
+    Dividing by a power of two is exact, so a mesh scaled by ``2**k`` gives bit-identical
+    iterations; any other scale changes nothing beyond round-off. Every tolerance inside
+    the solve (convergence floor, cotangent caps) is then relative to the mesh's own size,
+    and squared lengths neither overflow nor underflow for extents anywhere in the double
+    range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> unit_scale(np.array([[0.0, 0, 0], [3, 0, 0]]), "m")
+    4.0
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    if len(V) < 2:
+        return 1.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = float(np.max(V.max(axis=0) - V.min(axis=0)))
+    if not math.isfinite(extent):
+        raise InputError(
+            f"{name}: coordinates span more than double precision can hold "
+            f"(from {V.min():.3g} to {V.max():.3g}); rescale the mesh"
+        )
+    if extent == 0:
+        return 1.0
+    return math.ldexp(1.0, math.frexp(extent)[1])
 
 
 def anchor_components(mesh: Mesh, handles: np.ndarray, policy: str = "fix"):
@@ -530,16 +547,14 @@ class Deformer:
         self.device = _check_device(device)
         self.mesh = mesh
         self.weights_kind = weights
-        self.tol = float(tol)
-        self.max_iter = int(max_iter)
+        self.tol = tolerance(tol)
+        self.max_iter = iteration_cap(max_iter)
         if init not in INITS:
             raise InputError(f"unknown init '{init}' (use {' or '.join(INITS)})")
         self.init = init
         self.free_components = free_components
         self.accelerate = bool(accelerate)
-        if int(history) < 1:
-            raise InputError(f"history must be >= 1, got {history}")
-        self.history = int(history)
+        self.history = integer(history, "history", lo=1, hi=1000)
         self.timings: dict[str, float] = {}
         self._nb: Neighbourhoods | None = None
         self._nb_public: Neighbourhoods | None = None
@@ -556,7 +571,9 @@ class Deformer:
         self._iperm = np.empty(n, dtype=np.int64)
         self._iperm[self._perm] = np.arange(n)
         self._E = self._iperm[mesh.edges]  # same edge ids, internal vertex numbers
-        self._P0 = np.ascontiguousarray(mesh.vertices[self._perm])
+        # internal unit: a power of two near the extent (exact), see unit_scale
+        self._scale = unit_scale(mesh.vertices, mesh.name)
+        self._P0 = np.ascontiguousarray(mesh.vertices[self._perm] / self._scale)
         self._setup_ms = 1e3 * (time.perf_counter() - t0)
         self.set_handles(handles)
         self.set_rings(rings)
@@ -587,6 +604,11 @@ class Deformer:
         self._nb_public = None
         self._dw = nbh.edge_count * self.w
         self._rest_term = weighted_edge_norms(self._P0, self._E, self._dw)
+        if not math.isfinite(self._rest_term * self._scale * self._scale):
+            raise InputError(
+                f"{self.mesh.name}: coordinates too large for double precision (extent about "
+                f"{self._scale:.3g}: the deformation energy overflows); rescale the mesh"
+            )
         # upper rows of the Laplacian of d_e w_e, for the quadratic term of the energy
         a, b = self._E.min(axis=1), self._E.max(axis=1)
         order = np.argsort(a, kind="stable")
@@ -747,9 +769,9 @@ class Deformer:
         >>> float(d.vertex_energy(m.vertices, R).max())
         0.0
         """
-        Pi = np.ascontiguousarray(np.asarray(P, dtype=np.float64)[self._perm])
+        Pi = np.ascontiguousarray(np.asarray(P, dtype=np.float64)[self._perm] / self._scale)
         Ri = np.ascontiguousarray(np.asarray(R, dtype=np.float64)[self._perm])
-        return self._vertex_energy(Pi, Ri)[self._iperm]
+        return self._vertex_energy(Pi, Ri)[self._iperm] * (self._scale * self._scale)
 
     def _vertex_energy(self, Pi: np.ndarray, Ri: np.ndarray) -> np.ndarray:
         out = np.empty(len(Pi))
@@ -760,7 +782,7 @@ class Deformer:
 
     def _initial_positions(self, targets: np.ndarray, init) -> np.ndarray | None:
         if init is not None and not isinstance(init, str):
-            P = np.array(init, dtype=np.float64)
+            P = real_array(init, "init")
             if P.shape != self.mesh.vertices.shape or not np.isfinite(P).all():
                 raise InputError(
                     f"init: expected finite positions of shape {self.mesh.vertices.shape}"
@@ -814,13 +836,15 @@ class Deformer:
         """
         t_start = time.perf_counter()
         T = check_targets(self.handles, targets)
-        tol = self.tol if tol is None else float(tol)
-        max_iter = self.max_iter if max_iter is None else int(max_iter)
+        tol = self.tol if tol is None else tolerance(tol)
+        max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
+        s = self._scale
+        s2 = s * s
         accelerate = self.accelerate if accelerate is None else bool(accelerate)
         self.prepare()
         n = self.mesh.n_vertices
         nf = len(self._free_int)
-        C = self._constrained_targets(T)
+        C = self._constrained_targets(T) / s
         fixed_rhs = np.ascontiguousarray(self._A_fc @ C) if nf else np.zeros((0, 3))
         R = np.empty((n, 3, 3))
         P0 = self._initial_positions(T, init)
@@ -835,10 +859,11 @@ class Deformer:
         else:
             # handles are snapped before the first fit, as libigl does, so the first
             # rotations already see the new targets
-            P = np.ascontiguousarray(P0[self._perm])
+            P = np.ascontiguousarray(P0[self._perm] / s)
             P[self._cons_int] = C
             t0 = time.perf_counter()
             E_prev = self._local(P, R)
+            self._check_finite(E_prev, 0, T)
             self._rhs(fixed_rhs, rhs)
             t_local += time.perf_counter() - t0
         aa = Anderson(3 * nf, self.history) if accelerate and nf else None
@@ -880,12 +905,13 @@ class Deformer:
             if it < max_iter:
                 self._rhs(fixed_rhs, rhs)
             t_local += time.perf_counter() - t2
-            history.append(E)
+            self._check_finite(E, it, T)
+            history.append(E * s2)
             # abs(): obtuse meshes have negative cotangent weights and can have E < 0
             if abs(E) <= floor or (E_prev is not None and (E_prev - E) / abs(E_prev) < tol):
                 converged = True
             E_prev = E
-            if callback is not None and callback(it, E, P[self._iperm]):
+            if callback is not None and callback(it, E * s2, P[self._iperm] * s):
                 break
             if converged:
                 break
@@ -903,11 +929,26 @@ class Deformer:
         inv = self._iperm
 
         def vertex_energy() -> np.ndarray:
-            return self._vertex_energy(P, R)[inv]
+            return self._vertex_energy(P, R)[inv] * s2
 
-        if history:
-            energy = history[-1]
-        else:  # max_iter = 0: the energy of the start itself
-            ve = vertex_energy()
-            energy, vertex_energy = float(ve.sum()), ve
-        return Result(P[inv], energy, history, it, converged, R[inv], timings, vertex_energy)
+        V = P[inv] * s
+        if not np.isfinite(V).all():
+            self._check_finite(float("nan"), it, T)
+        return Result(V, history[-1], history, it, converged, R[inv], timings, vertex_energy)
+
+    def _check_finite(self, E: float, iteration: int, T: np.ndarray) -> None:
+        """Stop with a one-line error when the solve left the range of double precision.
+
+        Checked once per iteration on the energy (a scalar: free); a non-finite position
+        makes the energy non-finite too, and the positions are checked again at the end.
+        """
+        s2 = self._scale * self._scale
+        if math.isfinite(E) and math.isfinite(E * s2):
+            return
+        with np.errstate(over="ignore", invalid="ignore"):
+            far = float(np.max(np.abs(T))) if T.size else 0.0
+        raise InputError(
+            f"{self.mesh.name}: the solve produced non-finite values at iteration {iteration}: "
+            f"targets too large for double precision (largest |coordinate| {far:.3g}, "
+            f"mesh extent about {self._scale:.3g})"
+        )

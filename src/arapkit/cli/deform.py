@@ -20,11 +20,12 @@ import numpy as np
 from arapkit.cli.common import (
     Progress,
     add_example_epilog,
+    iteration_cap,
     load_mesh_checked,
     note,
-    positive_float,
-    positive_int,
+    ring_size,
     rings_summary,
+    tolerance,
 )
 from arapkit.errors import InputError
 from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
@@ -69,7 +70,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     rig.add_argument(
         "--rings",
         "-r",
-        type=positive_int,
+        type=ring_size,
         default=1,
         metavar="N",
         help="ring size r for every vertex; 1 is standard ARAP, larger is stiffer (default 1)",
@@ -88,13 +89,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     p.add_argument(
         "--tol",
-        type=positive_float,
+        type=tolerance,
         default=1e-3,
         help="stop when the relative energy decrease is below this (default 1e-3)",
     )
     p.add_argument(
         "--max-iter",
-        type=positive_int,
+        type=iteration_cap,
         default=1000,
         metavar="N",
         help="iteration cap (default 1000)",

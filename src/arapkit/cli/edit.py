@@ -12,10 +12,13 @@ Examples
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from arapkit.cli.common import port, ring_size, upload_mb
 
 _DESCRIPTION = """\
 Start a local editor in the browser: pick handle regions (click or Shift+drag a rectangle),
@@ -40,7 +43,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--rings-file", metavar="R", help="per-vertex r (text, .npy or PLY 'rings')")
     p.add_argument(
         "--rings",
-        type=int,
+        type=ring_size,
         default=1,
         metavar="N",
         help="uniform r when no rings file is given (default 1)",
@@ -51,7 +54,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--port",
-        type=int,
+        type=port,
         default=8080,
         help="port (default 8080; the next free one is used when taken)",
     )
@@ -66,7 +69,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--max-upload-mb",
-        type=float,
+        type=upload_mb,
         default=64.0,
         metavar="MB",
         help="size cap for files uploaded from the page (default 64)",
@@ -89,6 +92,7 @@ def build_state(args: argparse.Namespace) -> Any:
     from arapkit.editor.state import EditorState
     from arapkit.errors import InputError
     from arapkit.handles import load_handles, load_rings
+    from arapkit.validate import ring_size as ring_size_rule
 
     if args.session:
         if args.mesh:
@@ -98,8 +102,7 @@ def build_state(args: argparse.Namespace) -> Any:
         st = EditorState(load_mesh(args.mesh), mesh_path=str(Path(args.mesh).resolve()))
     else:
         st = _bar_state()
-    if args.rings < 1:
-        raise InputError(f"--rings: r must be >= 1, got {args.rings}")
+    ring_size_rule(args.rings, "--rings")
     if not args.session and args.rings != 1:
         st.rings = st._check_rings(args.rings)
     if args.rings_file:
@@ -129,8 +132,9 @@ def run(args: argparse.Namespace) -> int:
     state = build_state(args)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(
-            f"arapkit edit: warning: serving on {args.host}: anyone who can reach this "
-            "address can edit and write to the export folder"
+            f"arapkit: warning: serving on {args.host}: anyone who can reach this "
+            "address can edit and write to the export folder",
+            file=sys.stderr,
         )
     app = EditorApp(
         state,
