@@ -18,6 +18,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from .errors import InputError
+from .validate import real_array
 
 __all__ = ["Mesh", "load_mesh"]
 
@@ -78,10 +79,8 @@ class Mesh:
 
     # -- validation -------------------------------------------------------
     def _check_vertices(self, vertices) -> np.ndarray:
-        try:
-            V = np.array(vertices, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise InputError(f"{self.name}: vertices are not numeric ({exc})") from None
+        # real_array refuses text, objects and complex values (numpy would convert them)
+        V = np.array(real_array(vertices, f"{self.name}: vertices"), dtype=np.float64)
         if V.ndim != 2 or V.shape[1] != 3:
             raise InputError(f"{self.name}: vertices must have shape (n, 3), got {V.shape}")
         if len(V) == 0:
@@ -96,6 +95,13 @@ class Mesh:
 
     def _check_faces(self, faces) -> np.ndarray:
         n = len(self.vertices)
+        if isinstance(faces, np.ndarray) and faces.ndim != 2:
+            raise InputError(f"{self.name}: faces must have shape (m, 3) or be a list of "
+                             f"polygons, got an array of shape {faces.shape}")
+        if not isinstance(faces, np.ndarray) and (
+                isinstance(faces, (str, bytes)) or not hasattr(faces, "__len__") or any(
+                    isinstance(f, (str, bytes)) or not hasattr(f, "__len__") for f in faces)):
+            raise InputError(f"{self.name}: faces must be a list of vertex index lists")
         if not isinstance(faces, np.ndarray) and len(faces) and all(len(f) == 3 for f in faces):
             faces = np.asarray(faces)
         if isinstance(faces, np.ndarray) and faces.ndim == 2:
@@ -121,9 +127,15 @@ class Mesh:
         if len(F) == 0:
             raise InputError(f"{self.name}: mesh has no faces")
         if not np.issubdtype(np.asarray(F).dtype, np.integer):
-            Ff = np.asarray(F, dtype=np.float64)
+            Ff = real_array(F, f"{self.name}: faces")
             if not np.all(np.isfinite(Ff)) or np.any(Ff != np.round(Ff)):
                 raise InputError(f"{self.name}: face indices must be integers")
+            # beyond int64 (e.g. 1e23): out of range whatever the mesh, and no overflow
+            huge = np.abs(Ff) >= 2.0**62
+            if huge.any():
+                f = int(np.argmax(huge.any(axis=1)))
+                raise InputError(f"{self.name}: face {f} references vertex "
+                                 f"{Ff[f][huge[f]][0]:.3g} but the mesh has {n} vertices")
         F = np.asarray(F, dtype=np.int64)
         out = np.flatnonzero(((F < 0) | (F >= n)).any(axis=1))
         if len(out):

@@ -69,7 +69,12 @@ def _show(value: Any) -> str:
     """A short, one-line rendering of a bad value (huge integers in e-notation)."""
     if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
         v = int(value)
-        return f"{float(v):.3g}" if abs(v) >= 10**15 else str(v)
+        if abs(v) < 10**15:
+            return str(v)
+        try:
+            return f"{float(v):.3g}"
+        except OverflowError:  # beyond the double range: say how many digits
+            return f"{'-' if v < 0 else ''}about 1e+{int(v.bit_length() * 0.30103)}"
     text = repr(value) if isinstance(value, str) else str(value)
     text = " ".join(text.split())
     return text if len(text) <= 60 else text[:57] + "..."
@@ -217,7 +222,11 @@ def real_array(values: Any, what: str, dtype: Any = np.float64) -> np.ndarray:
     except (ValueError, TypeError, OverflowError, RecursionError) as exc:
         raise InputError(f"{what}: not a numeric array ({_show(exc)})") from None
     if arr.dtype.kind == "O" and arr.size:
-        # Python ints beyond 64 bits (or mixed types) land here
+        # Python ints beyond 64 bits, or mixed types, land here; astype would also turn
+        # the text "1.5" into a number, so every element must be a real number itself
+        if not all(isinstance(x, numbers.Real) and not isinstance(x, (bool, np.bool_))
+                   for x in arr.flat):
+            raise InputError(f"{what}: expected numbers, got mixed or non-numeric values")
         try:
             arr = arr.astype(np.float64)
         except (ValueError, TypeError, OverflowError):
@@ -251,6 +260,13 @@ def check_finite_positions(P: np.ndarray, what: str) -> np.ndarray:
     return P
 
 
+def _numbers(values: Any, count: int, what: str) -> np.ndarray:
+    """``count`` finite numbers (JSON numbers: text is refused here)."""
+    if any(isinstance(x, (str, bytes)) for x in values):
+        raise InputError(f"{what}: expected {count} numbers, got text")
+    return np.array([number(x, what) for x in values])
+
+
 def vec3(value: Any, what: str) -> np.ndarray:
     """Three finite numbers.
 
@@ -261,7 +277,7 @@ def vec3(value: Any, what: str) -> np.ndarray:
     """
     if not isinstance(value, (list, tuple, np.ndarray)) or len(value) != 3:
         raise InputError(f"{what}: expected 3 numbers, got {_show(value)}")
-    return np.array([number(x, what) for x in value])
+    return _numbers(value, 3, what)
 
 
 def quaternion(value: Any, what: str = "wxyz") -> np.ndarray:
@@ -281,7 +297,7 @@ def quaternion(value: Any, what: str = "wxyz") -> np.ndarray:
     """
     if not isinstance(value, (list, tuple, np.ndarray)) or len(value) != 4:
         raise InputError(f"{what}: expected 4 numbers (w, x, y, z), got {_show(value)}")
-    q = np.array([number(x, what) for x in value])
+    q = _numbers(value, 4, what)
     m = np.abs(q).max()
     if m == 0:
         raise InputError(f"{what}: a rotation quaternion must not be zero")
