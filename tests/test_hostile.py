@@ -519,6 +519,15 @@ def test_session_uploads_through_the_app(tmp_path, st):
         with pytest.raises(InputError, match="over the 1.0 MB limit"):
             app.load_rings_bytes("r.txt", b"1\n" * 600_000)
         assert json.dumps(app.state.to_dict()) == before
+        # the solver panel's values pass the same rules (a client can send any number)
+        settings = app.state.settings
+        for widget, bad in ((app.nb_tol, float("nan")), (app.nb_maxit, -3),
+                            (app.nb_tol, -1.0), (app.nb_budget, float("inf"))):
+            old = widget.value
+            widget.value = bad  # runs the page's callback, which reports and changes nothing
+            assert app.state.settings == settings
+            assert app.md_status.content.startswith("⚠")
+            app._quietly(lambda w=widget, v=old: setattr(w, "value", v))
     finally:
         app.stop()
 

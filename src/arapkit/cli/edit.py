@@ -120,8 +120,9 @@ def _bar_state() -> Any:
     mesh = bar()
     st = EditorState(mesh)
     x = mesh.vertices[:, 0]
-    st.add_handle(np.flatnonzero(x <= x.min() + 1e-9), name="fixed end", frozen=True)
-    st.add_handle(np.flatnonzero(x >= x.max() - 1e-9), name="free end")
+    tol = 1e-9 * (x.max() - x.min())  # relative: the caps at any scale
+    st.add_handle(np.flatnonzero(x <= x.min() + tol), name="fixed end", frozen=True)
+    st.add_handle(np.flatnonzero(x >= x.max() - tol), name="free end")
     return st
 
 

@@ -37,7 +37,7 @@ import numpy as np
 import viser
 
 from arapkit import validate
-from arapkit.editor.state import CameraView, EditorState, raycast
+from arapkit.editor.state import CameraView, EditorState, SolverSettings, raycast
 from arapkit.editor.views import (
     RING_COLORS,
     SHADED_COLOR,
@@ -626,12 +626,16 @@ class EditorApp:
         self._after_edit()
 
     def _apply_settings(self) -> None:
-        s = self.state.settings
-        s.method = METHODS[self.dd_method.value]
-        s.weights = str(self.dd_weights.value)
-        s.tol = float(self.nb_tol.value)
-        s.max_iter = int(self.nb_maxit.value)
-        s.live_budget_ms = float(self.nb_budget.value)
+        # the page's values pass the same rules as a session's (a client can send anything)
+        s = SolverSettings.from_dict({
+            **self.state.settings.to_dict(),
+            "method": METHODS.get(self.dd_method.value, self.dd_method.value),
+            "weights": self.dd_weights.value,
+            "tol": self.nb_tol.value,
+            "max_iter": self.nb_maxit.value,
+            "live_budget_ms": self.nb_budget.value,
+        })
+        self.state.settings = s
         if s.method == "laplacian":
             self._vertex_energy = None
         self.request_solve()
