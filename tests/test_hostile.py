@@ -301,6 +301,17 @@ def test_unwritable_output_found_before_loading(capsys, files, locked, which):
     assert not (tmp / "o.ply").exists()
 
 
+def test_unwritable_outputs_of_learn_and_demo(capsys, files, locked):
+    tmp, _, _ = files
+    line = cli_refuses(capsys, tmp, "learn", tmp / "missing.npz", "-o", locked / "r.txt")
+    assert f"{locked / 'r.txt'}: cannot write the output" in line
+    line = cli_refuses(capsys, tmp, "learn", tmp / "missing.npz", "-o", tmp / "r.txt",
+                       "--figure", locked / "f.png")
+    assert f"{locked / 'f.png'}: cannot write the figure" in line
+    line = cli_refuses(capsys, tmp, "demo", "--out", locked, "--quiet")
+    assert f"{locked / 'demo-report.json'}: cannot write the demo output" in line
+
+
 def test_check_output_path_leaves_nothing_behind(tmp_path):
     check_output_path(tmp_path / "o.ply")
     assert list(tmp_path.iterdir()) == []
