@@ -90,3 +90,14 @@ def test_too_large_is_refused_by_number_range(scale):
         Deformer(ms, h, rings=2).solve(t * scale)
     msg = str(e.value)
     assert "double precision" in msg and "degenerate" not in msg and "obtuse" not in msg
+
+
+@pytest.mark.parametrize("scale", [1e-12, 1.0, 1e12])
+def test_editor_picking_at_any_scale(scale):
+    from arapkit.editor.state import raycast
+
+    V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]) * scale
+    hit = raycast(V, np.array([[0, 1, 2]]), np.array([0.2, 0.2, 1.0]) * scale,
+                  np.array([0.0, 0, -1]))
+    assert hit is not None and hit[0] == 0
+    np.testing.assert_allclose(hit[1], np.array([0.2, 0.2, 0]) * scale, atol=1e-12 * scale)

@@ -277,6 +277,10 @@ def _learn(args, frames: Frames, ref: int):
         warnings.simplefilter("ignore", UserWarning)
         res = learn_rings(reference, [frames.vertices[i] for i in others], args.r_min,
                           args.r_max, args.omega, args.weights)
+    if not (np.isfinite(res.energies).all() and np.isfinite(res.omega)):
+        # nothing non-finite is written (the energies file, the choice of r behind the map)
+        raise InputError(f"{frames.names[ref]}: the ARAP energies overflow double precision "
+                         "(coordinates too large); rescale the frames")
     # warnings are shown even with --quiet: they say the result may be meaningless
     for j in res.identical:
         _warn(f"{frames.names[others[j]]} is identical to the reference: it carries no "

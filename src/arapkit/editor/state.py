@@ -142,7 +142,9 @@ def raycast(
     e1, e2 = b - a, c - a
     p = np.cross(d, e2)
     det = np.einsum("ij,ij->i", e1, p)
-    ok = np.abs(det) > 1e-14
+    # parallel-ray test relative to the face's size: picking works at any mesh scale
+    size = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * np.linalg.norm(d)
+    ok = np.abs(det) > 1e-12 * size
     inv = np.zeros_like(det)
     inv[ok] = 1.0 / det[ok]
     s = o - a
