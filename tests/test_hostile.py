@@ -609,3 +609,12 @@ def test_sel_status_beyond_c_integer(tmp_path, mesh):
     p.write_text("\n".join(["0"] + ["1" + "0" * 30] * (mesh.n_vertices - 2) + ["2"]))
     hs = load_sel(p, mesh.vertices)  # huge statuses are "free", as any other code
     assert hs.indices.tolist() == [0, mesh.n_vertices - 1]
+
+
+def test_file_names_with_nul_bytes(mesh):
+    for call in (lambda: load_handles("a\0b.json", mesh.vertices),
+                 lambda: load_rings("r\0.txt", mesh.n_vertices),
+                 lambda: EditorState.read_session("s\0.json")):
+        with pytest.raises(InputError) as e:
+            call()
+        assert "\0" not in str(e.value) and "\\x00" in str(e.value)

@@ -444,6 +444,8 @@ def _read_text(path: Path) -> str:
         raise InputError(f"{path}: is a folder, expected a file") from None
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text file") from None
+    except ValueError:  # the OS refuses names with a NUL byte
+        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)") from None
 
 
 def load_handles(
@@ -713,6 +715,8 @@ def load_rings(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
     """
     path = Path(path)
     name = path.name.lower()
+    if "\0" in str(path):
+        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)")
     if not path.exists():
         raise InputError(f"{path}: file not found")
     if name.endswith(".npy"):

@@ -711,6 +711,8 @@ class EditorState:
             text = Path(path).read_bytes()
         except OSError as exc:
             raise InputError(f"{path}: cannot read session ({exc.strerror or exc})") from None
+        except ValueError:  # the OS refuses names with a NUL byte
+            raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)") from None
         try:
             d = validate.parse_json(text, str(path))
         except InputError as exc:
