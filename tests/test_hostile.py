@@ -618,3 +618,11 @@ def test_file_names_with_nul_bytes(mesh):
         with pytest.raises(InputError) as e:
             call()
         assert "\0" not in str(e.value) and "\\x00" in str(e.value)
+
+
+@pytest.mark.parametrize("token", ["--1", "+-2", "\u00b2", "\u0663", "1_000"])
+def test_rings_tokens_that_fool_isdigit(tmp_path, token):
+    p = tmp_path / "r.txt"
+    p.write_text(f"1\n{token}\n1\n", encoding="utf-8")
+    with pytest.raises(InputError, match="is not an integer"):
+        load_rings(p, 3)

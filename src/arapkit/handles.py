@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -176,8 +177,10 @@ def select_sphere(vertices: np.ndarray, center: Sequence[float], radius: float) 
     [1]
     """
     V = np.asarray(vertices, dtype=np.float64)
-    d2 = np.sum((V - np.asarray(center, float)) ** 2, axis=1)
-    return np.flatnonzero(d2 <= float(radius) ** 2).astype(np.int64)
+    with np.errstate(over="ignore"):  # numpy squares go to inf; Python's float ** raises
+        d2 = np.sum((V - np.asarray(center, float)) ** 2, axis=1)
+        r2 = np.float64(radius) ** 2
+    return np.flatnonzero(d2 <= r2).astype(np.int64)
 
 
 def select_nearest(vertices: np.ndarray, point: Sequence[float], k: int) -> np.ndarray:
@@ -530,6 +533,9 @@ def save_handles(path: str | os.PathLike, handles: HandleSet) -> None:
 # --------------------------------------------------------------------------- .sel / .def
 
 
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+
+
 def _tokens(path: Path) -> list[str]:
     """Whitespace-separated tokens of a text file, skipping ``#`` comment lines."""
     out: list[str] = []
@@ -545,7 +551,8 @@ def _int_tokens(path: Path, what: str) -> list[int]:
     A token that is not an integer names itself; ranges are the caller's rule.
     """
     toks = _tokens(path)
-    bad = next((t for t in toks if not t.lstrip("+-").isdigit() or len(t) > 4000), None)
+    # ASCII digits with one optional sign: "--1" and "²" pass str.isdigit but not int()
+    bad = next((t for t in toks if not _INTEGER.fullmatch(t) or len(t) > 4000), None)
     if bad is not None:
         shown = bad if len(bad) <= 40 else bad[:37] + "..."
         raise InputError(f"{path}: {what} {shown!r} is not an integer")

@@ -102,6 +102,8 @@ class Mesh:
                 isinstance(faces, (str, bytes)) or not hasattr(faces, "__len__") or any(
                     isinstance(f, (str, bytes)) or not hasattr(f, "__len__") for f in faces)):
             raise InputError(f"{self.name}: faces must be a list of vertex index lists")
+        if len(faces) == 0:
+            raise InputError(f"{self.name}: mesh has no faces")
         if not isinstance(faces, np.ndarray) and len(faces) and all(len(f) == 3 for f in faces):
             faces = np.asarray(faces)
         if isinstance(faces, np.ndarray) and faces.ndim == 2:
@@ -119,6 +121,11 @@ class Mesh:
                     f"{self.name}: face {short[0]} has {len(polys[short[0]])} corners "
                     "(need at least 3)"
                 )
+            flat = real_array([i for p in polys for i in p], f"{self.name}: faces")
+            if flat.dtype.kind == "f" and (
+                    not np.isfinite(flat).all() or (flat != np.round(flat)).any()
+                    or (np.abs(flat) >= 2.0**62).any()):
+                raise InputError(f"{self.name}: face indices must be integers in 0..{n - 1}")
             F, split = _fan_triangulate(polys)
             if split:
                 self.notes.append(
