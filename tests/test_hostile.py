@@ -234,6 +234,11 @@ def test_edit_options_refused_before_starting(capsys, tmp_path, args, fragment, 
     assert fragment in line
 
 
+def test_edit_unbindable_host_refused_not_hanging(capsys, tmp_path):
+    line = cli_refuses(capsys, tmp_path, "edit", "--host", "999.1.1.1", "--port", "18123")
+    assert "--host: cannot listen on '999.1.1.1'" in line
+
+
 def test_editor_app_validates_port_and_cap_before_starting():
     import arapkit.editor.app as app_mod
 

@@ -39,6 +39,7 @@ __all__ = [
     "MAX_UPLOAD_MB",
     "check_finite_positions",
     "handle_indices",
+    "host",
     "integer",
     "iteration_cap",
     "json_depth",
@@ -414,6 +415,31 @@ def port(value: Any, what: str = "--port") -> int:
     8080
     """
     return integer(value, what, lo=1, hi=65535)
+
+
+def host(value: Any, what: str = "--host") -> str:
+    """An address this machine can listen on (checked by binding a throwaway socket).
+
+    Without this check a server that cannot bind may retry ports forever.
+
+    Examples
+    --------
+    >>> host("127.0.0.1")
+    '127.0.0.1'
+    """
+    import socket
+
+    if not isinstance(value, str) or not value or "\0" in value:
+        raise InputError(f"{what}: expected a host name or address, got {_show(value)}")
+    try:
+        infos = socket.getaddrinfo(value, 0, type=socket.SOCK_STREAM)
+        family, _, _, _, addr = infos[0]
+        with socket.socket(family, socket.SOCK_STREAM) as s:
+            s.bind(addr)
+    except (OSError, UnicodeError) as e:
+        reason = getattr(e, "strerror", None) or str(e)
+        raise InputError(f"{what}: cannot listen on {_show(value)} ({reason})") from None
+    return value
 
 
 def upload_mb(value: Any, what: str = "--max-upload-mb") -> float:

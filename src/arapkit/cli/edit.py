@@ -129,7 +129,9 @@ def _bar_state() -> Any:
 def run(args: argparse.Namespace) -> int:
     """Start the editor and serve until Ctrl-C."""
     from arapkit.editor.app import EditorApp
+    from arapkit.validate import host
 
+    host(args.host, "--host")  # before anything starts: a server that cannot bind hangs
     state = build_state(args)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(

@@ -120,6 +120,7 @@ class EditorApp:
     ) -> None:
         # checked before anything starts: a bad port must not leave a thread running
         port = validate.port(port, "port")
+        host = validate.host(host, "host")
         max_upload_mb = validate.upload_mb(max_upload_mb, "max_upload_mb")
         self.state = state
         self.export_dir = Path(export_dir).expanduser().resolve()
