@@ -153,5 +153,5 @@ def test_device_option():
 
 def test_history_option_checked():
     m = bar()
-    with pytest.raises(InputError, match="history must be >= 1"):
+    with pytest.raises(InputError, match="history: must be at least 1"):
         Deformer(m, [0], accelerate=True, history=0)

@@ -180,7 +180,7 @@ def test_set_global_rings_and_bad_rings(st):
     assert np.all(st.rings == 3)
     with pytest.raises(InputError, match="1154"):
         st.load_rings(np.ones(5, int))
-    with pytest.raises(InputError, match="r < 1"):
+    with pytest.raises(InputError, match=r"r = 0 \(r must be 1\.\.100\)"):
         st.load_rings(np.zeros(st.n, int))
 
 

@@ -301,9 +301,9 @@ def test_rings_text_npy_and_ply(tmp_path):
     "name, content, message",
     [
         ("r.txt", "1\n2\n", "r.txt: 2 rigidity values for a mesh of 5 vertices"),
-        ("r.txt", "1\n2\n0\n1\n1\n", "r of vertex 2 is 0; r must be >= 1"),
+        ("r.txt", "1\n2\n0\n1\n1\n", "vertex 2 has r = 0"),
         ("r.txt", "1\n2\n2.5\n1\n1\n", "rigidity value '2.5' is not an integer"),
-        ("r.npy", np.array([1.0, 2.0, 2.5, 1.0, 1.0]), "r of vertex 2 is 2.5, not an integer"),
+        ("r.npy", np.array([1.0, 2.0, 2.5, 1.0, 1.0]), "value 2.5 at vertex 2 is not an integer"),
         ("r.npy", np.ones((5, 1), dtype=int), "must be 1-D"),
         ("r.npy", np.ones(6, dtype=int), "6 rigidity values for a mesh of 5 vertices"),
         ("r.npy", b"garbage", "not a readable .npy"),
@@ -337,7 +337,7 @@ def test_save_rings_round_trip(tmp_path):
         assert load_rings(tmp_path / name, 5).tolist() == r.tolist()
     with pytest.raises(InputError, match="needs the mesh"):
         save_rings(tmp_path / "r.ply", r)
-    with pytest.raises(InputError, match="must be >= 1"):
+    with pytest.raises(InputError, match=r"r must be 1\.\.100"):
         save_rings(tmp_path / "bad.txt", np.array([0, 1]))
 
 

@@ -28,6 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from .errors import Advice, InputError
+from .validate import handle_indices, target_positions
 
 if TYPE_CHECKING:
     from .mesh import Mesh
@@ -45,43 +46,21 @@ __all__ = [
 def check_handles(mesh: Mesh | EdgeGraph, handles) -> np.ndarray:
     """Validate handle vertex indices (integers, unique, in range) and return them as int64.
 
+    A boolean array of one value per vertex is read as a mask. The rule is
+    :func:`arapkit.validate.handle_indices`.
+
     Examples
     --------
     >>> from arapkit.shapes import bar
     >>> check_handles(bar(), [0, 5]).tolist()
     [0, 5]
     """
-    h = np.asarray(handles)
-    if h.ndim != 1:
-        h = h.reshape(-1)
-    if len(h) == 0:
-        raise InputError(f"{mesh.name}: no handle vertices given")
-    if not np.issubdtype(h.dtype, np.integer):
-        hf = np.asarray(h, dtype=np.float64)
-        if not np.all(hf == np.round(hf)):
-            raise InputError(f"{mesh.name}: handle indices must be integers")
-    h = h.astype(np.int64)
-    bad = np.flatnonzero((h < 0) | (h >= mesh.n_vertices))
-    if len(bad):
-        raise InputError(
-            f"{mesh.name}: handle {bad[0]} is vertex {h[bad[0]]}, out of range "
-            f"(mesh has {mesh.n_vertices} vertices)"
-        )
-    uniq, counts = np.unique(h, return_counts=True)
-    if (counts > 1).any():
-        raise InputError(f"{mesh.name}: vertex {uniq[counts > 1][0]} is listed twice as a handle")
-    return h
+    return handle_indices(handles, mesh.n_vertices, mesh.name)
 
 
 def check_targets(handles: np.ndarray, targets, name: str = "targets") -> np.ndarray:
-    """Validate handle targets: shape (len(handles), 3), finite."""
-    T = np.asarray(targets, dtype=np.float64)
-    if T.shape != (len(handles), 3):
-        raise InputError(f"{name}: expected shape ({len(handles)}, 3), got {T.shape}")
-    bad = np.flatnonzero(~np.isfinite(T).all(axis=1))
-    if len(bad):
-        raise InputError(f"{name}: handle {bad[0]} (vertex {handles[bad[0]]}) target is not finite")
-    return T
+    """Validate handle targets: real, shape (len(handles), 3), finite."""
+    return target_positions(handles, targets, name)
 
 
 #: what to do with a connected component that holds no handle (the first is the default)

@@ -113,7 +113,10 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
     folder = path.parent if str(path.parent) else Path(".")
     if not folder.is_dir():
         raise InputError(f"{path}: folder {str(folder)!r} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=folder)
+    except OSError as e:  # name the user's file, not the temporary one
+        raise InputError(f"{path}: cannot write ({e.strerror or e})") from None
     try:
         kwargs = {"encoding": "utf-8", "newline": "\n"} if "b" not in mode else {}
         with os.fdopen(fd, mode, **kwargs) as f:
@@ -124,7 +127,10 @@ def atomic_open(path: str | os.PathLike, mode: str = "wb") -> Iterator[IO]:
         umask = os.umask(0)
         os.umask(umask)
         os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, path)
+        except OSError as e:
+            raise InputError(f"{path}: cannot write ({e.strerror or e})") from None
     except BaseException:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
@@ -173,7 +179,28 @@ def check_output_path(
         for inp in inputs:
             if inp is not None and Path(inp).exists() and os.path.samefile(p, inp):
                 raise InputError(f"{p}: {what} would overwrite an input file (use --force)")
+    _probe_writable(p, folder, what)
     return p
+
+
+def _probe_writable(p: Path, folder: Path, what: str) -> None:
+    """Create and remove a scratch file next to ``p``: the only test that also sees
+    read-only mounts, immutable folders and root's limits (``os.access`` does not)."""
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", suffix=".probe", dir=folder)
+    except OSError as e:
+        raise InputError(
+            f"{p}: cannot write the {what} in folder {str(folder)!r} ({e.strerror or e})"
+        ) from None
+    os.close(fd)
+    with contextlib.suppress(OSError):
+        os.unlink(tmp)
+    if p.exists():
+        try:  # opening for update changes neither content nor times
+            with open(p, "r+b"):
+                pass
+        except OSError as e:
+            raise InputError(f"{p}: cannot overwrite the {what} ({e.strerror or e})") from None
 
 
 # --------------------------------------------------------------------------- JSON
@@ -345,6 +372,13 @@ def save_mesh(
     """
     fmt, gz = mesh_format(path)
     V = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    # no file with a NaN or infinite coordinate ever leaves the library
+    bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
+    if len(bad):
+        raise InputError(
+            f"{path}: not written: vertex {bad[0]} has a non-finite coordinate "
+            f"({len(bad)} such vertices)"
+        )
     props = dict(vertex_properties or {})
     warnings: list[str] = []
     attrs = None
@@ -414,10 +448,12 @@ def read_ply_vertex_properties(path: str | os.PathLike) -> dict[str, np.ndarray]
         raise InputError(f"{path}: not a readable PLY file ({e})") from None
     ply_raw = getattr(loaded, "metadata", {}).get("_ply_raw", {})
     data = ply_raw.get("vertex", {}).get("data")
-    if data is None or data.dtype.names is None:
+    # trimesh gives a structured array, or a dict of arrays for some binary layouts
+    if isinstance(data, dict):
+        names = list(data)
+    else:
+        names = getattr(getattr(data, "dtype", None), "names", None)
+    if not names:
         raise InputError(f"{path}: PLY file has no vertex element")
-    return {
-        name: np.asarray(data[name]).reshape(-1)
-        for name in data.dtype.names
-        if data[name].ndim == 1
-    }
+    cols = {name: np.asarray(data[name]) for name in names}
+    return {name: a.reshape(-1) for name, a in cols.items() if a.ndim == 1 or a.shape[1:] == (1,)}

@@ -30,6 +30,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from arapkit.errors import InputError
+from arapkit.validate import parse_json, ring_sizes
 
 __all__ = [
     "HandleGroup",
@@ -177,8 +179,10 @@ def select_sphere(vertices: np.ndarray, center: Sequence[float], radius: float) 
     [1]
     """
     V = np.asarray(vertices, dtype=np.float64)
-    d2 = np.sum((V - np.asarray(center, float)) ** 2, axis=1)
-    return np.flatnonzero(d2 <= float(radius) ** 2).astype(np.int64)
+    with np.errstate(over="ignore"):  # numpy squares go to inf; Python's float ** raises
+        d2 = np.sum((V - np.asarray(center, float)) ** 2, axis=1)
+        r2 = np.float64(radius) ** 2
+    return np.flatnonzero(d2 <= r2).astype(np.int64)
 
 
 def select_nearest(vertices: np.ndarray, point: Sequence[float], k: int) -> np.ndarray:
@@ -215,6 +219,7 @@ def rotation_matrix(axis: Sequence[float], degrees: float) -> np.ndarray:
     [0.0, 1.0, 0.0]
     """
     a = np.asarray(axis, dtype=np.float64)
+    a = a / np.abs(a).max()  # first to O(1): the norm of a 1e200 axis would overflow
     a = a / np.linalg.norm(a)
     t = math.radians(float(degrees))
     K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
@@ -237,18 +242,32 @@ class _Where:
 
 def _is_number(x: Any) -> bool:
     # JSON true/false arrive as bool, a subclass of int: never accept them as numbers
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+    if not isinstance(x, (int, float)) or isinstance(x, bool):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:  # an integer too large for a double
+        return False
+
+
+def _brief(value: Any) -> str:
+    """A bad value as short one-line JSON for a message."""
+    try:
+        text = json.dumps(value)
+    except (TypeError, ValueError, RecursionError):
+        text = type(value).__name__
+    return text if len(text) <= 60 else text[:57] + "..."
 
 
 def _vec3(value: Any, what: str, err: _Where) -> np.ndarray:
     if not (isinstance(value, list) and len(value) == 3 and all(_is_number(x) for x in value)):
-        raise err(f"{what} must be a list of 3 finite numbers, got {json.dumps(value)}")
+        raise err(f"{what} must be a list of 3 finite numbers, got {_brief(value)}")
     return np.asarray(value, dtype=np.float64)
 
 
 def _check_keys(obj: Any, allowed: frozenset, what: str, err: _Where) -> dict:
     if not isinstance(obj, dict):
-        raise err(f"{what} must be an object, got {json.dumps(obj)}")
+        raise err(f"{what} must be an object, got {_brief(obj)}")
     unknown = sorted(set(obj) - allowed)
     if unknown:
         raise err(f"unknown key {unknown[0]!r} in {what} (allowed: {', '.join(sorted(allowed))})")
@@ -274,10 +293,12 @@ def _select(group: dict, vertices: np.ndarray, err: _Where) -> np.ndarray:
             isinstance(i, int) and not isinstance(i, bool) for i in raw
         ):
             raise err("'indices' must be a list of integers")
+        # range first, in Python: an index of 10**30 does not fit a C integer
+        bad = next((i for i in raw if not 0 <= i < n), None)
+        if bad is not None:
+            shown = bad if abs(bad) < 10**15 else f"{float(bad):.3g}"
+            raise err(f"vertex index {shown} out of range (mesh has {n} vertices)")
         idx = np.asarray(raw, dtype=np.int64)
-        bad = idx[(idx < 0) | (idx >= n)]
-        if bad.size:
-            raise err(f"vertex index {int(bad[0])} out of range (mesh has {n} vertices)")
         uniq, counts = np.unique(idx, return_counts=True)
         if np.any(counts > 1):
             raise err(f"vertex {int(uniq[counts > 1][0])} listed twice")
@@ -293,14 +314,14 @@ def _select(group: dict, vertices: np.ndarray, err: _Where) -> np.ndarray:
         c = _vec3(sph["center"], "sphere 'center'", err)
         r = sph["radius"]
         if not _is_number(r) or r <= 0:
-            raise err(f"sphere 'radius' must be a positive number, got {json.dumps(r)}")
+            raise err(f"sphere 'radius' must be a positive number, got {_brief(r)}")
         sel = select_sphere(vertices, c, r)
     else:
         near = _sub(group, "nearest", err)
         p = _vec3(near["point"], "nearest 'point'", err)
         k = near["k"]
         if not (isinstance(k, int) and not isinstance(k, bool)) or not 1 <= k <= n:
-            raise err(f"nearest 'k' must be an integer in 1..{n}, got {json.dumps(k)}")
+            raise err(f"nearest 'k' must be an integer in 1..{n}, got {_brief(k)}")
         sel = select_nearest(vertices, p, k)
     if sel.size == 0:
         raise err(f"{kind} selects no vertices")
@@ -334,7 +355,7 @@ def _move(group: dict, rest: np.ndarray, err: _Where) -> tuple[np.ndarray, str]:
         if np.linalg.norm(axis) == 0:
             raise err("rotate 'axis' must be non-zero")
         if not _is_number(rot["degrees"]):
-            raise err(f"rotate 'degrees' must be a number, got {json.dumps(rot['degrees'])}")
+            raise err(f"rotate 'degrees' must be a number, got {_brief(rot['degrees'])}")
         # default centre: the group's own centroid, so "rotate in place" needs no coordinates
         c = _vec3(rot["center"], "rotate 'center'", err) if "center" in rot else rest.mean(0)
         out = (out - c) @ rotation_matrix(axis, rot["degrees"]).T + c
@@ -417,6 +438,8 @@ def parse_handles(data: Any, vertices: np.ndarray, source: str = "<handles>") ->
             )
         owner[idx] = len(groups)
         targets, kind = _move(g, V[idx], err)
+        if not np.isfinite(targets).all():
+            raise err("the motion puts targets beyond double precision (too large to represent)")
         groups.append(HandleGroup(name, idx, targets, kind))
     return HandleSet(groups, source=source)
 
@@ -430,6 +453,8 @@ def _read_text(path: Path) -> str:
         raise InputError(f"{path}: is a folder, expected a file") from None
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text file") from None
+    except ValueError:  # the OS refuses names with a NUL byte
+        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)") from None
 
 
 def load_handles(
@@ -467,12 +492,7 @@ def load_handles(
         return load_sel(path, vertices, load_def(transform))
     if transform is not None:
         raise InputError(f"{transform}: a .def transform only applies to .sel handle files")
-    text = _read_text(path)
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as e:
-        where = f"line {e.lineno} column {e.colno}"
-        raise InputError(f"{path}: not valid JSON ({e.msg} at {where})") from None
+    data = parse_json(_read_text(path), str(path))
     return parse_handles(data, vertices, source=str(path))
 
 
@@ -519,6 +539,9 @@ def save_handles(path: str | os.PathLike, handles: HandleSet) -> None:
 # --------------------------------------------------------------------------- .sel / .def
 
 
+_INTEGER = re.compile(r"[+-]?[0-9]+")
+
+
 def _tokens(path: Path) -> list[str]:
     """Whitespace-separated tokens of a text file, skipping ``#`` comment lines."""
     out: list[str] = []
@@ -528,14 +551,18 @@ def _tokens(path: Path) -> list[str]:
     return out
 
 
-def _int_tokens(path: Path, what: str) -> np.ndarray:
-    """The whitespace-separated integers of a text file; a non-integer names itself."""
+def _int_tokens(path: Path, what: str) -> list[int]:
+    """The whitespace-separated integers of a text file (Python ints: no size limit).
+
+    A token that is not an integer names itself; ranges are the caller's rule.
+    """
     toks = _tokens(path)
-    try:
-        return np.array([int(t) for t in toks], dtype=np.int64)
-    except ValueError:
-        bad = next(t for t in toks if not t.lstrip("+-").isdigit())
-        raise InputError(f"{path}: {what} {bad!r} is not an integer") from None
+    # ASCII digits with one optional sign: "--1" and "²" pass str.isdigit but not int()
+    bad = next((t for t in toks if not _INTEGER.fullmatch(t) or len(t) > 4000), None)
+    if bad is not None:
+        shown = bad if len(bad) <= 40 else bad[:37] + "..."
+        raise InputError(f"{path}: {what} {shown!r} is not an integer")
+    return [int(t) for t in toks]
 
 
 def load_def(path: str | os.PathLike) -> np.ndarray:
@@ -594,7 +621,9 @@ def load_sel(
     """
     path = Path(path)
     V = np.asarray(vertices, dtype=np.float64)
-    status = _int_tokens(path, "status")
+    # statuses are small codes: anything else is "free", clipping keeps int64 safe
+    status = np.clip(np.array([max(min(t, 9), -9) for t in _int_tokens(path, "status")],
+                              dtype=np.int64), -9, 9)
     if len(status) != len(V):
         raise InputError(f"{path}: {len(status)} vertex statuses for a mesh of {len(V)} vertices")
     fixed, moved = np.flatnonzero(status == 0), np.flatnonzero(status == 2)
@@ -654,24 +683,14 @@ def save_def(path: str | os.PathLike, matrix: np.ndarray) -> None:
 # --------------------------------------------------------------------------- rigidity maps
 
 
-def _validate_rings(values: np.ndarray, n_vertices: int, path: Path) -> np.ndarray:
-    arr = np.asarray(values)
-    if arr.ndim != 1:
+def _validate_rings(values: Any, n_vertices: int, path: Path) -> np.ndarray:
+    """One r per vertex, each in ``1..MAX_RINGS`` (:func:`arapkit.validate.ring_sizes`)."""
+    arr = values if isinstance(values, list) else np.asarray(values)
+    if isinstance(arr, np.ndarray) and arr.ndim != 1:
         raise InputError(f"{path}: rigidity map must be 1-D (one r per vertex), got {arr.shape}")
     if len(arr) != n_vertices:
         raise InputError(f"{path}: {len(arr)} rigidity values for a mesh of {n_vertices} vertices")
-    if arr.dtype.kind == "f":
-        bad = ~np.isfinite(arr) | (arr != np.round(arr))
-        if np.any(bad):
-            i = int(np.argmax(bad))
-            raise InputError(f"{path}: r of vertex {i} is {arr[i]}, not an integer")
-    elif arr.dtype.kind not in "iu":
-        raise InputError(f"{path}: rigidity values must be integers, got dtype {arr.dtype}")
-    r = arr.astype(np.int64)
-    if np.any(r < 1):
-        i = int(np.argmax(r < 1))
-        raise InputError(f"{path}: r of vertex {i} is {r[i]}; r must be >= 1")
-    return r
+    return ring_sizes(arr, n_vertices, str(path)).astype(np.int64)
 
 
 def _rings_from_ply(path: Path) -> np.ndarray:
@@ -709,6 +728,8 @@ def load_rings(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
     """
     path = Path(path)
     name = path.name.lower()
+    if "\0" in str(path):
+        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)")
     if not path.exists():
         raise InputError(f"{path}: file not found")
     if name.endswith(".npy"):

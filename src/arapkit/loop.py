@@ -7,6 +7,7 @@ per-iteration callback live here and nowhere else (libigl's ``arap_solve``).
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -15,6 +16,8 @@ import numpy as np
 
 from .accel import Anderson
 from .constraints import follow_rigidly
+from .errors import InputError
+from .validate import iteration_cap, tolerance
 
 __all__ = ["Result", "local_global"]
 
@@ -69,8 +72,33 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         with identity rotations (the paper).
     tol, max_iter, callback, accelerate, history :
         As for :meth:`arapkit.Deformer.solve`.
+
+    Positions cross this boundary in the caller's units and are divided by
+    ``problem.scale`` (a power of two, so exactly) inside; results, energies and what the
+    callback sees are scaled back. Any non-finite energy or position stops the solve with
+    an :class:`~arapkit.errors.InputError` instead of reaching a file.
     """
     t_start = time.perf_counter()
+    tol, max_iter = tolerance(tol), iteration_cap(max_iter)
+    s = problem.scale
+    s2 = s * s
+    raw_targets = targets
+    targets = np.asarray(targets, dtype=np.float64) / s
+    if start is not None:
+        start = np.asarray(start, dtype=np.float64) / s
+
+    def check_finite(E: float, iteration: int) -> None:
+        # one scalar per iteration: a non-finite position makes the energy non-finite too
+        if math.isfinite(E) and math.isfinite(E * s2):
+            return
+        with np.errstate(over="ignore", invalid="ignore"):
+            far = float(np.max(np.abs(raw_targets))) if np.size(raw_targets) else 0.0
+        raise InputError(
+            f"{problem.graph.name}: the solve produced non-finite values at iteration "
+            f"{iteration}: targets too large for double precision (largest |coordinate| "
+            f"{far:.3g}, mesh extent about {s:.3g})"
+        )
+
     el = problem.elimination
     free, cons = el.free, el.constrained
     perm, inv = problem.perm, problem.iperm
@@ -98,6 +126,7 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         if coupled:
             R_prev[:] = np.eye(3)
         E_prev = backend.local(P, R, R_prev)
+        check_finite(E_prev, 0)
         backend.rhs(fixed_rhs, rhs)
         t_local += time.perf_counter() - t0
     aa = Anderson(3 * nf, history) if accelerate and nf else None
@@ -141,13 +170,14 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         if it < max_iter:
             backend.rhs(fixed_rhs, rhs)
         t_local += time.perf_counter() - t2
+        check_finite(E, it)
         hist.append(E)
         # abs(): obtuse meshes have negative cotangent weights and can have E < 0; a method
         # that is not a descent method (SR-ARAP) may also rise: the change is what counts
         if abs(E) <= floor or (E_prev is not None and abs(E_prev - E) / abs(E_prev) < tol):
             converged = True
         E_prev = E
-        if callback is not None and callback(it, E, P[inv]):
+        if callback is not None and callback(it, E * s2, P[inv] * s):
             break
         if converged:
             break
@@ -164,16 +194,15 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         timings["accel_rejected"] = rejected
 
     def vertex_energy() -> np.ndarray:
-        return backend.vertex_energy(P, R)[inv]
+        return backend.vertex_energy(P, R)[inv] * s2
 
-    if hist:
-        energy = hist[-1]
-    else:  # max_iter = 0: the energy of the start itself
-        ve = vertex_energy()
-        energy, vertex_energy = float(ve.sum()), ve
+    hist = [E * s2 for E in hist]
     V, Rv = P[inv], R[inv]
     if problem.free_components == "follow" and len(problem.fixed_extra):
         # components without handles: energy 0 at rest and under any rigid motion; place
         # them with their neighbours rather than leave them behind
         follow_rigidly(problem.caller_graph, problem.fixed_extra, V, Rv)
-    return Result(V, energy, hist, it, converged, Rv, timings, vertex_energy)
+    V *= s
+    if not np.isfinite(V).all():
+        check_finite(math.nan, it)
+    return Result(V, hist[-1], hist, it, converged, Rv, timings, vertex_energy)

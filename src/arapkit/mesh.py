@@ -19,6 +19,7 @@ from scipy.sparse.csgraph import connected_components
 
 from .attributes import MeshAttributes
 from .errors import InputError
+from .validate import real_array
 
 __all__ = [
     "COORDINATE_RANGE",
@@ -233,6 +234,11 @@ class Mesh:
                     f"{self.name}: face {short[0]} has {len(polys[short[0]])} corners "
                     "(need at least 3)"
                 )
+            flat = real_array([i for p in polys for i in p], f"{self.name}: faces")
+            if flat.dtype.kind == "f" and (
+                    not np.isfinite(flat).all() or (flat != np.round(flat)).any()
+                    or (np.abs(flat) >= 2.0**62).any()):
+                raise InputError(f"{self.name}: face indices must be integers in 0..{n - 1}")
             F, split = _fan_triangulate(polys)
             if split:
                 self.notes.append(
@@ -241,9 +247,15 @@ class Mesh:
         if len(F) == 0:
             raise InputError(f"{self.name}: mesh has no faces")
         if not np.issubdtype(np.asarray(F).dtype, np.integer):
-            Ff = np.asarray(F, dtype=np.float64)
+            Ff = real_array(F, f"{self.name}: faces")
             if not np.all(np.isfinite(Ff)) or np.any(Ff != np.round(Ff)):
                 raise InputError(f"{self.name}: face indices must be integers")
+            # beyond int64 (e.g. 1e23): out of range whatever the mesh, and no overflow
+            huge = np.abs(Ff) >= 2.0**62
+            if huge.any():
+                f = int(np.argmax(huge.any(axis=1)))
+                raise InputError(f"{self.name}: face {f} references vertex "
+                                 f"{Ff[f][huge[f]][0]:.3g} but the mesh has {n} vertices")
         try:
             F = np.asarray(F, dtype=np.int64)
         except OverflowError:

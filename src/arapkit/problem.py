@@ -19,6 +19,7 @@ The problem can be built from a triangle :class:`~arapkit.mesh.Mesh`
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 from functools import cached_property
@@ -35,7 +36,7 @@ if TYPE_CHECKING:
     from .energy import NeighbourhoodEnergy
     from .mesh import Mesh
 
-__all__ = ["ARAPProblem", "EdgeGraph", "bandwidth_order"]
+__all__ = ["ARAPProblem", "EdgeGraph", "bandwidth_order", "unit_scale"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -104,6 +105,13 @@ class EdgeGraph:
         A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
         return (A + A.T).tocsr()
 
+    def scaled(self, factor: float) -> EdgeGraph:
+        """The same graph with every position multiplied by ``factor`` (components kept)."""
+        g = EdgeGraph(self.vertices * factor, self.edges, self.name, self.faces,
+                      self.face_edges)
+        g.__dict__["_components"] = (self.n_components, self.component_labels)
+        return g
+
     def permuted(self, perm: np.ndarray, iperm: np.ndarray) -> EdgeGraph:
         """The same graph with vertex ``perm[i]`` renamed ``i`` (edge and face ids kept)."""
         g = EdgeGraph(
@@ -115,6 +123,36 @@ class EdgeGraph:
         )
         g.__dict__["_components"] = (self.n_components, self.component_labels[perm])
         return g
+
+
+def unit_scale(vertices: np.ndarray, name: str) -> float:
+    """The power of two ``s`` with ``extent / s`` in [0.5, 1): the solver works in ``V / s``.
+
+    Dividing by a power of two is exact, so a mesh scaled by ``2**k`` gives bit-identical
+    iterations; any other scale changes nothing beyond round-off. Every tolerance inside
+    the solve (convergence floor, cotangent caps) is then relative to the mesh's own size,
+    and squared lengths neither overflow nor underflow for extents anywhere in the double
+    range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> unit_scale(np.array([[0.0, 0, 0], [3, 0, 0]]), "m")
+    4.0
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    if len(V) < 2:
+        return 1.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = float(np.max(V.max(axis=0) - V.min(axis=0)))
+    if not math.isfinite(extent):
+        raise InputError(
+            f"{name}: coordinates span more than double precision can hold "
+            f"(from {V.min():.3g} to {V.max():.3g}); rescale the mesh"
+        )
+    if extent == 0:
+        return 1.0
+    return math.ldexp(1.0, math.frexp(extent)[1])
 
 
 def bandwidth_order(mesh: Mesh | EdgeGraph) -> np.ndarray:
@@ -194,6 +232,8 @@ class ARAPProblem:
     free_components: str = "follow"
     caller_graph: EdgeGraph | None = field(default=None, repr=False)
     timings: dict[str, float] = field(default_factory=dict, repr=False)
+    #: the power of two the positions are divided by inside (see :func:`unit_scale`)
+    scale: float = 1.0
 
     # -- construction --------------------------------------------------------------
     @classmethod
@@ -281,6 +321,11 @@ class ARAPProblem:
         from .rings import check_rings
 
         n = graph.n_vertices
+        # the problem lives in units of a power of two near the extent: exact, and every
+        # tolerance inside becomes relative to the mesh's own size
+        s = unit_scale(graph.vertices, graph.name)
+        if s != 1.0:
+            graph = graph.scaled(1.0 / s)
         perm = bandwidth_order(graph) if reorder and n > 1 else np.arange(n, dtype=np.int64)
         iperm = np.empty(n, dtype=np.int64)
         iperm[perm] = np.arange(n)
@@ -290,7 +335,13 @@ class ARAPProblem:
         rings = check_rings(rings, n)
         t1 = time.perf_counter()
         en = make_energy(energy, inner, w, kind, rings=rings, perm=perm, **energy_options)
-        p = cls(inner, perm, iperm, w, kind, en, h, extra, notes, free_components, graph)
+        if not math.isfinite(en.rest_term * s * s):
+            raise InputError(
+                f"{graph.name}: coordinates too large for double precision (extent about "
+                f"{s:.3g}: the deformation energy overflows); rescale the mesh"
+            )
+        p = cls(inner, perm, iperm, w, kind, en, h, extra, notes, free_components, graph,
+                scale=s)
         p.timings["neighbourhood_ms"] = setup_ms + 1e3 * (time.perf_counter() - t1)
         return p
 

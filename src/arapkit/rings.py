@@ -24,10 +24,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from .errors import InputError
 from .mesh import Mesh
-
-MAX_RINGS = 100
+from .validate import MAX_RINGS, ring_sizes
 
 __all__ = [
     "MAX_RINGS",
@@ -42,31 +40,14 @@ __all__ = [
 def check_rings(rings, n_vertices: int, name: str = "rings") -> np.ndarray:
     """Validate an int or per-vertex array of ring counts and return it as (n,) int32.
 
+    The rule (integers in ``1..MAX_RINGS``) is :func:`arapkit.validate.ring_sizes`.
+
     Examples
     --------
     >>> check_rings(2, 3).tolist()
     [2, 2, 2]
     """
-    r = np.asarray(rings)
-    if r.ndim == 0:
-        r = np.full(n_vertices, r)
-    if r.shape != (n_vertices,):
-        raise InputError(
-            f"{name}: has {r.size} values but the mesh has {n_vertices} vertices"
-        )
-    if not np.issubdtype(r.dtype, np.integer):
-        rf = r.astype(np.float64)
-        if not np.all(np.isfinite(rf)) or np.any(rf != np.round(rf)):
-            bad = int(np.flatnonzero(~np.isfinite(rf) | (rf != np.round(rf)))[0])
-            raise InputError(f"{name}: value {r[bad]} at vertex {bad} is not an integer")
-    r = r.astype(np.int64)
-    if (r > MAX_RINGS).any():
-        bad = int(np.flatnonzero(r > MAX_RINGS)[0])
-        raise InputError(f"{name}: vertex {bad} has r = {r[bad]} (at most {MAX_RINGS})")
-    if (r < 1).any():
-        bad = int(np.flatnonzero(r < 1)[0])
-        raise InputError(f"{name}: vertex {bad} has r = {r[bad]} (r must be >= 1)")
-    return r.astype(np.int32)
+    return ring_sizes(rings, n_vertices, name)
 
 
 def vertex_adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -63,7 +63,7 @@ def bar(
 def _end_caps(mesh: Mesh) -> tuple[np.ndarray, np.ndarray, float]:
     x = mesh.vertices[:, 0]
     lo, hi = x.min(), x.max()
-    tol = 1e-9 * max(hi - lo, 1.0)
+    tol = 1e-9 * (hi - lo)  # relative: the caps are found at any scale
     return np.flatnonzero(x <= lo + tol), np.flatnonzero(x >= hi - tol), hi - lo
 
 

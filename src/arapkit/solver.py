@@ -40,12 +40,13 @@ from .energy import ENERGIES, LOCAL_GLOBAL
 from .errors import Advice, InputError
 from .loop import Result, local_global
 from .mesh import Mesh
-from .problem import ARAPProblem, bandwidth_order
+from .problem import ARAPProblem, bandwidth_order, unit_scale
 from .rings import Neighbourhoods
+from .validate import integer, iteration_cap, real_array, tolerance
 from .weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
-           "bandwidth_order", "check_method"]
+           "bandwidth_order", "check_method", "unit_scale"]
 
 INITS = ("identity", "laplacian")
 DEVICES = ("cpu", "auto")
@@ -206,8 +207,8 @@ class Deformer:
         self.mesh = mesh
         self.energy = energy
         self.weights_kind = weights
-        self.tol = float(tol)
-        self.max_iter = int(max_iter)
+        self.tol = tolerance(tol)
+        self.max_iter = iteration_cap(max_iter)
         if init not in INITS:
             raise InputError(f"unknown init '{init}' (use {' or '.join(INITS)})")
         self.init = init
@@ -216,9 +217,7 @@ class Deformer:
             raise InputError(f"accelerate: Anderson acceleration is for the local/global "
                              f"descent methods; energy '{energy}' is not one "
                              "(use accelerate=False)")
-        if int(history) < 1:
-            raise InputError(f"history must be >= 1, got {history}")
-        self.history = int(history)
+        self.history = integer(history, "history", lo=1, hi=1000)
         self.factorisations = 0
         self._laplacian_editor = None
         self.embedded = None
@@ -392,13 +391,13 @@ class Deformer:
         0.0
         """
         p = self._local_global("vertex_energy")
-        Pi = np.ascontiguousarray(np.asarray(P, dtype=np.float64)[p.perm])
+        Pi = np.ascontiguousarray(np.asarray(P, dtype=np.float64)[p.perm] / p.scale)
         Ri = np.ascontiguousarray(np.asarray(R, dtype=np.float64)[p.perm])
-        return self.backend.vertex_energy(Pi, Ri)[p.iperm]
+        return self.backend.vertex_energy(Pi, Ri)[p.iperm] * (p.scale * p.scale)
 
     def _initial_positions(self, targets: np.ndarray, init) -> np.ndarray | None:
         if init is not None and not isinstance(init, str):
-            P = np.array(init, dtype=np.float64)
+            P = np.array(real_array(init, "init"), dtype=np.float64)
             if P.shape != self.mesh.vertices.shape or not np.isfinite(P).all():
                 raise InputError(
                     f"init: expected finite positions of shape {self.mesh.vertices.shape}"
@@ -444,8 +443,8 @@ class Deformer:
         Result
         """
         T = check_targets(self.handles, targets)
-        tol = self.tol if tol is None else float(tol)
-        max_iter = self.max_iter if max_iter is None else int(max_iter)
+        tol = self.tol if tol is None else tolerance(tol)
+        max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
         accelerate = self.accelerate if accelerate is None else bool(accelerate)
         if accelerate and self.energy not in ("rring", "spokes-and-rims"):
             raise InputError(f"accelerate: Anderson acceleration is for the local/global "

@@ -52,6 +52,10 @@ def _corner_cotangents(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     for c in range(3):
         a = V[F[:, (c + 1) % 3]] - V[F[:, c]]
         b = V[F[:, (c + 2) % 3]] - V[F[:, c]]
+        # cot is scale-free: divide both sides by a power of two near their size (exact)
+        # so that dot and cross neither overflow (coordinates ~1e200) nor underflow (~1e-160)
+        _, e = np.frexp(np.maximum(np.abs(a).max(axis=1), np.abs(b).max(axis=1)))
+        a, b = np.ldexp(a, -e[:, None]), np.ldexp(b, -e[:, None])
         dot = np.einsum("ij,ij->i", a, b)
         cross = np.linalg.norm(np.cross(a, b), axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):

@@ -56,6 +56,14 @@ def _version() -> str:
         return "unknown"
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with one-line usage errors, like every other error of the command line."""
+
+    def error(self, message: str):  # type: ignore[override]
+        self.exit(2, f"arapkit: error: {self.prog}: {' '.join(message.split())} "
+                     f"(see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The top-level parser with one subparser per available command.
 
@@ -65,7 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
     >>> p.parse_args(["info", "x.off"]).command
     'info'
     """
-    parser = argparse.ArgumentParser(
+    parser = _Parser(
         prog="arapkit",
         description="As-rigid-as-possible surface deformation with controllable rigidity "
         "(r-ring ARAP, Chen et al. 2017).",

@@ -11,52 +11,57 @@ from typing import Any
 
 import numpy as np
 
+from arapkit import validate
 from arapkit.errors import InputError
 
 __all__ = [
     "Progress",
     "add_weld_option",
     "add_view_options",
+    "iteration_cap",
     "load_mesh_checked",
     "maybe_weld",
     "note",
+    "port",
     "positive_float",
     "positive_int",
+    "ring_size",
+    "tolerance",
+    "upload_mb",
 ]
 
 
-def positive_int(text: str) -> int:
-    """argparse type: an integer >= 1.
+def _option_type(check: Callable[[str, str], Any], name: str) -> Callable[[str], Any]:
+    """An argparse ``type`` running a :mod:`arapkit.validate` rule on the option's text.
 
-    Examples
-    --------
-    >>> positive_int("3")
-    3
+    argparse prefixes the option name itself, so the rule's own prefix is dropped.
     """
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"must be at least 1, got {value}")
-    return value
+
+    def parse(text: str) -> Any:
+        try:
+            return check(text, "value")
+        except InputError as e:
+            raise argparse.ArgumentTypeError(str(e).removeprefix("value: ")) from None
+
+    parse.__name__ = name  # argparse names the type in some messages
+    return parse
 
 
-def positive_float(text: str) -> float:
-    """argparse type: a finite number > 0.
-
-    Examples
-    --------
-    >>> positive_float("1e-3")
-    0.001
-    """
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a number, got {text!r}") from None
-    if not math.isfinite(value) or value <= 0:
-        raise argparse.ArgumentTypeError(f"must be a positive number, got {text}")
-    return value
+#: argparse type: an integer >= 1 (bounded, no overflow)
+positive_int = _option_type(lambda t, w: validate.integer(t, w, lo=1), "positive_int")
+#: argparse type: a finite number > 0
+positive_float = _option_type(lambda t, w: validate.number(t, w, lo=0.0, lo_open=True),
+                              "positive_float")
+#: argparse type: the convergence tolerance (finite, >= 0)
+tolerance = _option_type(validate.tolerance, "tolerance")
+#: argparse type: an iteration cap (1..10^9)
+iteration_cap = _option_type(validate.iteration_cap, "iteration_cap")
+#: argparse type: a ring size r (1..MAX_RINGS)
+ring_size = _option_type(validate.ring_size, "ring_size")
+#: argparse type: a TCP port (1..65535)
+port = _option_type(validate.port, "port")
+#: argparse type: an upload cap in MiB (finite, > 0)
+upload_mb = _option_type(validate.upload_mb, "upload_mb")
 
 
 def add_view_options(parser: argparse.ArgumentParser) -> None:
@@ -109,7 +114,8 @@ def load_mesh_checked(path: str):
         return load_mesh(path)
     except InputError:
         raise
-    except (ValueError, IndexError, KeyError, EOFError, UnicodeDecodeError, OSError) as e:
+    except (ValueError, IndexError, KeyError, EOFError, UnicodeDecodeError, OSError,
+            OverflowError) as e:
         raise InputError(f"{path}: cannot read mesh ({type(e).__name__}: {e})") from None
 
 

@@ -22,9 +22,11 @@ from arapkit.cli.common import (
     add_example_epilog,
     add_view_options,
     add_weld_option,
+    iteration_cap,
     note,
     positive_float,
-    positive_int,
+    ring_size,
+    tolerance,
     warn,
 )
 from arapkit.errors import InputError, worded_for
@@ -73,7 +75,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     rig.add_argument(
         "--rings",
         "-r",
-        type=positive_int,
+        type=ring_size,
         default=1,
         metavar="N",
         help="ring size r for every vertex; 1 is standard ARAP, larger is stiffer (default 1)",
@@ -109,13 +111,13 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     p.add_argument(
         "--tol",
-        type=positive_float,
+        type=tolerance,
         default=1e-3,
         help="stop when the relative energy decrease is below this (default 1e-3)",
     )
     p.add_argument(
         "--max-iter",
-        type=positive_int,
+        type=iteration_cap,
         default=1000,
         metavar="N",
         help="iteration cap (default 1000)",

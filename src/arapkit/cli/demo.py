@@ -119,7 +119,14 @@ def _prepare_out(path: str) -> Path:
         raise InputError(f"{out}: exists and is not a folder")
     if not out.parent.is_dir() and str(out.parent):
         raise InputError(f"{out}: parent folder {str(out.parent)!r} does not exist")
-    out.mkdir(exist_ok=True)
+    try:
+        out.mkdir(exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{out}: cannot create the output folder ({e.strerror or e})") from None
+    from arapkit.fileio import check_output_path
+
+    # before any solve: the folder must really take files (read-only or immutable ones don't)
+    check_output_path(out / "demo-report.json", what="demo output")
     return out
 
 

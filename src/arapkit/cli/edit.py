@@ -12,12 +12,13 @@ Examples
 from __future__ import annotations
 
 import argparse
+import sys
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from arapkit.cli.common import add_example_epilog
+from arapkit.cli.common import add_example_epilog, port, ring_size, upload_mb
 
 _DESCRIPTION = """\
 Start a local editor in the browser: pick handle regions (click or Shift+drag a rectangle),
@@ -50,7 +51,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--rings-file", metavar="R", help="per-vertex r (text, .npy or PLY 'rings')")
     p.add_argument(
         "--rings",
-        type=int,
+        type=ring_size,
         default=1,
         metavar="N",
         help="uniform r when no rings file is given (default 1)",
@@ -64,7 +65,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--port",
-        type=int,
+        type=port,
         default=8080,
         help="port (default 8080; the next free one is used when taken)",
     )
@@ -86,7 +87,7 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--max-upload-mb",
-        type=float,
+        type=upload_mb,
         default=64.0,
         metavar="MB",
         help="size cap for files uploaded from the page (default 64)",
@@ -109,6 +110,7 @@ def build_state(args: argparse.Namespace) -> Any:
     from arapkit.editor.state import EditorState
     from arapkit.errors import InputError
     from arapkit.handles import load_handles, load_rings
+    from arapkit.validate import ring_size as ring_size_rule
 
     if args.session:
         if args.mesh:
@@ -121,8 +123,7 @@ def build_state(args: argparse.Namespace) -> Any:
         st = EditorState(mesh, mesh_path=str(Path(args.mesh).resolve()))
     else:
         st = _bar_state()
-    if args.rings < 1:
-        raise InputError(f"--rings: r must be >= 1, got {args.rings}")
+    ring_size_rule(args.rings, "--rings")
     if not args.session and args.rings != 1:
         st.rings = st._check_rings(args.rings)
     # files given on the command line index the input's vertices, also when welded
@@ -153,8 +154,9 @@ def _bar_state() -> Any:
     mesh = bar()
     st = EditorState(mesh)
     x = mesh.vertices[:, 0]
-    st.add_handle(np.flatnonzero(x <= x.min() + 1e-9), name="fixed end", frozen=True)
-    st.add_handle(np.flatnonzero(x >= x.max() - 1e-9), name="free end")
+    tol = 1e-9 * (x.max() - x.min())  # relative: the caps at any scale
+    st.add_handle(np.flatnonzero(x <= x.min() + tol), name="fixed end", frozen=True)
+    st.add_handle(np.flatnonzero(x >= x.max() - tol), name="free end")
     return st
 
 
@@ -172,12 +174,15 @@ def _up(text: str | None) -> str | None:
 def run(args: argparse.Namespace) -> int:
     """Start the editor and serve until Ctrl-C."""
     from arapkit.editor.app import EditorApp
+    from arapkit.validate import host
 
+    host(args.host, "--host")  # before anything starts: a server that cannot bind hangs
     state = build_state(args)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(
-            f"arapkit edit: warning: serving on {args.host}: anyone who can reach this "
-            "address can edit and write to the export folder"
+            f"arapkit: warning: serving on {args.host}: anyone who can reach this "
+            "address can edit and write to the export folder",
+            file=sys.stderr,
         )
     app = EditorApp(
         state,

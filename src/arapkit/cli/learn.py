@@ -39,6 +39,7 @@ from arapkit.cli.common import (
     positive_int,
 )
 from arapkit.errors import InputError
+from arapkit.validate import real_array
 from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["Frames", "add_parser", "expand_frames", "load_frames", "parse_omega", "run"]
@@ -200,6 +201,16 @@ def _load_npz(path: str) -> Frames:
         raise InputError(f"{path}: 'V' must have shape (frames, vertices, 3), got {V.shape}")
     if F.ndim != 2 or F.shape[1] != 3:
         raise InputError(f"{path}: 'F' must have shape (triangles, 3), got {F.shape}")
+    if len(V) < 2:
+        raise InputError(f"{path}: holds {len(V)} frame(s); learning needs at least two "
+                         "(a reference and an example)")
+    V = real_array(V, f"{path}: 'V'")
+    F = real_array(F, f"{path}: 'F'", dtype=None)
+    bad = ~np.isfinite(V).all(axis=2)
+    if bad.any():
+        frame, vertex = (int(i[0]) for i in np.nonzero(bad))
+        raise InputError(f"{path}: frame {frame} has a non-finite coordinate at vertex {vertex} "
+                         f"({int(bad.any(axis=1).sum())} such frames)")
     names = [f"{os.path.basename(path)}[{i}]" for i in range(len(V))]
     return Frames([v.astype(np.float64) for v in V], F, names)
 
@@ -365,6 +376,10 @@ def _learn(args, frames: Frames, ref: int):
             res = _learn_sequences(args, frames, ref, reference)
         else:
             res = learn_rings(reference, poses, args.r_min, args.r_max, args.omega, args.weights)
+    if not (np.isfinite(res.energies).all() and np.isfinite(res.omega)):
+        # nothing non-finite is written (the energies file, the choice of r behind the map)
+        raise InputError(f"{frames.names[ref]}: the ARAP energies overflow double precision "
+                         "(coordinates too large); rescale the frames")
     # warnings are shown even with --quiet: they say the result may be meaningless
     for j in res.identical:
         _warn(f"{frames.names[others[j]]} is identical to the reference: it carries no "
@@ -421,8 +436,8 @@ def run(args: argparse.Namespace) -> int:
     _check_outputs(args, [f for f in args.frames if os.path.isfile(f)])
     frames = load_frames(args.frames)
     if len(frames) < 2:
-        raise InputError(f"learning needs at least two frames (a reference and an example), "
-                         f"got {len(frames)}")
+        raise InputError(f"{', '.join(frames.names) or 'no frames'}: learning needs at least "
+                         f"two frames (a reference and an example), got {len(frames)}")
     ref = args.reference
     if not 0 <= ref < len(frames):
         raise InputError(f"--reference {ref} is out of range: there are {len(frames)} frames "

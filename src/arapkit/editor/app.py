@@ -23,12 +23,12 @@ http://127.0.0.1:8123
 from __future__ import annotations
 
 import dataclasses
-import json
 import re
 import signal
 import tempfile
 import threading
 import time
+import traceback
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -36,7 +36,8 @@ from typing import Any
 import numpy as np
 import viser
 
-from arapkit.editor.state import CameraView, EditorState, raycast
+from arapkit import validate
+from arapkit.editor.state import CameraView, EditorState, SolverSettings, raycast
 from arapkit.editor.views import (
     RING_COLORS,
     SHADED_COLOR,
@@ -82,6 +83,12 @@ def _raise_keyboard_interrupt(signum: int, frame: Any) -> None:
     raise KeyboardInterrupt
 
 
+def _printable(name: Any) -> str:
+    """A file name safe to show in a one-line message (control characters escaped)."""
+    text = repr(str(name))[1:-1]
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
 def _size(n_bytes: float) -> str:
     """Human-readable size: ``_size(1536) == '1.5 KB'``."""
     for unit in ("bytes", "KB", "MB"):
@@ -119,6 +126,10 @@ class EditorApp:
     ) -> None:
         if up is not None and up not in UP_AXES:
             raise InputError(f"up axis {up!r}: expected one of {', '.join(UP_AXES)}")
+        # checked before anything starts: a bad port must not leave a thread running
+        port = validate.port(port, "port")
+        host = validate.host(host, "host")
+        max_upload_mb = validate.upload_mb(max_upload_mb, "max_upload_mb")
         self.state = state
         self._up_override = up
         self.up_reason = ""
@@ -142,7 +153,11 @@ class EditorApp:
         self.mesh_node: Any = None
         #: called as hook(update, perf_counter_when_sent) after each shape is handed to viser
         self.sent_hooks: list[Callable[[SolveUpdate, float], None]] = []
+        #: names of uploads dropped while arriving because they were over the cap
+        self.rejected_uploads: list[str] = []
+        self._upload_states: dict[str, Any] = {}
         self._build_gui()
+        self._guard_uploads()
         self._bind_scene_events()
         self.worker.start()
         self._install_mesh()
@@ -150,8 +165,9 @@ class EditorApp:
     # ================================================================ lifecycle
     @property
     def url(self) -> str:
-        host = self.server.get_host()
-        shown = "127.0.0.1" if host in ("0.0.0.0", "") else host
+        """The address served, as bound (``0.0.0.0`` means every interface)."""
+        host = self.server.get_host() or "0.0.0.0"
+        shown = f"[{host}]" if ":" in host else host
         return f"http://{shown}:{self.server.get_port()}"
 
     def stop(self) -> None:
@@ -511,6 +527,10 @@ class EditorApp:
                     fn(event)
             except InputError as exc:
                 self._notify(event, "Cannot do that", str(exc), error=True)
+            except Exception as exc:  # a bug, not the user's fault: say so in the page too
+                traceback.print_exc()
+                self._notify(event, "Internal error",
+                             f"{type(exc).__name__}: {exc} (please report this)", error=True)
 
         return wrapped
 
@@ -650,12 +670,16 @@ class EditorApp:
         self._after_edit()
 
     def _apply_settings(self) -> None:
-        s = self.state.settings
-        s.method = METHODS[self.dd_method.value]
-        s.weights = str(self.dd_weights.value)
-        s.tol = float(self.nb_tol.value)
-        s.max_iter = int(self.nb_maxit.value)
-        s.live_budget_ms = float(self.nb_budget.value)
+        # the page's values pass the same rules as a session's (a client can send anything)
+        s = SolverSettings.from_dict({
+            **self.state.settings.to_dict(),
+            "method": METHODS.get(self.dd_method.value, self.dd_method.value),
+            "weights": self.dd_weights.value,
+            "tol": self.nb_tol.value,
+            "max_iter": self.nb_maxit.value,
+            "live_budget_ms": self.nb_budget.value,
+        })
+        self.state.settings = s
         if s.method == "laplacian":
             self._vertex_energy = None
         self._show_settings()
@@ -774,7 +798,57 @@ class EditorApp:
         self._last_stroke_draw = time.perf_counter()
 
     # ---------------------------------------------------------------- files
+    def _guard_uploads(self) -> None:
+        """Enforce the upload cap while the parts arrive, not after the whole file did.
+
+        viser buffers every part of an upload and calls ``on_upload`` only at the end, with
+        no public hook before that. Its websocket layer runs every registered handler for a
+        message in order, after its own, so these handlers see each transfer start and each
+        part right after viser buffered it: a transfer that declares more than the cap is
+        dropped at its start message, and one that sends more than it declared (or than
+        the cap) is dropped at the part that crosses it. Dropping means removing viser's
+        buffer entry; viser then ignores the transfer's later parts. What remains: one
+        websocket message (viser caps them at 50 MiB) is read into memory before any
+        handler sees it. (Uses viser internals: ``scene._websock_interface`` and the GUI's
+        ``_current_file_upload_states``.)
+        """
+        from viser import _messages
+
+        ws = getattr(self.server.scene, "_websock_interface", None)
+        states = getattr(self.server.gui, "_current_file_upload_states", None)
+        if ws is None or states is None:  # another viser: the cap after upload still holds
+            return
+        self._upload_states = states
+        ws.register_handler(_messages.FileTransferStartUpload, self._on_upload_start)
+        ws.register_handler(_messages.FileTransferPart, self._on_upload_part)
+
+    def _drop_upload(self, client_id: Any, transfer: str, name: Any, size: float) -> None:
+        self._upload_states.pop(transfer, None)
+        self.rejected_uploads.append(str(name))
+        client = self.server.get_clients().get(client_id)
+        msg = (f"{_printable(name)}: {_size(size)} is over the {_size(self.max_upload_bytes)} "
+               "upload limit (start the editor with a larger --max-upload-mb)")
+        self._notify(type("Event", (), {"client": client})(), "Upload refused", msg, error=True)
+
+    def _on_upload_start(self, client_id: Any, message: Any) -> None:
+        if message.transfer_uuid in self._upload_states:
+            size = message.size_bytes
+            if not isinstance(size, int) or size > self.max_upload_bytes or size < 0:
+                self._drop_upload(client_id, message.transfer_uuid, message.filename,
+                                  size if isinstance(size, (int, float)) else float("nan"))
+
+    def _on_upload_part(self, client_id: Any, message: Any) -> None:
+        state = self._upload_states.get(message.transfer_uuid)
+        if state is None:
+            return
+        got = state["transferred_bytes"]
+        if got > self.max_upload_bytes or got > state["total_bytes"]:
+            self._drop_upload(client_id, message.transfer_uuid, state["filename"], got)
+
     def _check_upload(self, name: str, data: bytes, what: str) -> None:
+        if not isinstance(name, str) or any(ord(c) < 32 for c in name) or len(name) > 255:
+            raise InputError(f"{_printable(name)}: not a usable file name for {what} "
+                             "(control characters or too long)")
         if len(data) > self.max_upload_bytes:
             raise InputError(
                 f"{name}: {_size(len(data))} is over the {_size(self.max_upload_bytes)} "
@@ -830,10 +904,7 @@ class EditorApp:
     def load_session_bytes(self, name: str, data: bytes) -> None:
         """Apply an uploaded session to the loaded mesh (never opens a path it names)."""
         self._check_upload(name, data, "sessions")
-        try:
-            d = json.loads(data.decode("utf-8"))
-        except (UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise InputError(f"{name}: not a JSON session ({exc})") from None
+        d = validate.parse_json(data, name)
         if not isinstance(d, dict):
             raise InputError(f"{name}: a session must be a JSON object")
         with self.lock:

@@ -31,7 +31,6 @@ True
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -41,8 +40,9 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
+from arapkit import validate
 from arapkit.errors import InputError
-from arapkit.weights import DEFAULT_WEIGHTS
+from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 SESSION_FORMAT = "arapkit-editor-session"
 SESSION_VERSION = 1
@@ -144,7 +144,9 @@ def raycast(
     e1, e2 = b - a, c - a
     p = np.cross(d, e2)
     det = np.einsum("ij,ij->i", e1, p)
-    ok = np.abs(det) > 1e-14
+    # parallel-ray test relative to the face's size: picking works at any mesh scale
+    size = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * np.linalg.norm(d)
+    ok = np.abs(det) > 1e-12 * size
     inv = np.zeros_like(det)
     inv[ok] = 1.0 / det[ok]
     s = o - a
@@ -233,21 +235,40 @@ class Handle:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any], n_vertices: int) -> Handle:
-        """Inverse of :meth:`to_dict`; a handle given only by targets gets them as anchor."""
-        name = str(d.get("name", "handle"))
-        idx = np.asarray(d["vertices"], dtype=np.int64).reshape(-1)
-        if idx.size == 0 or idx.min() < 0 or idx.max() >= n_vertices:
-            raise InputError(
-                f"session handle {name!r}: vertex index out of range 0..{n_vertices - 1}"
-            )
-        anchor = np.asarray(d.get("anchor", d.get("targets")), dtype=np.float64)
+        """Inverse of :meth:`to_dict`; a handle given only by targets gets them as anchor.
+
+        Every field is checked with the rules of :mod:`arapkit.validate`; a bad one raises
+        :class:`InputError` naming the handle and the field.
+        """
+        if not isinstance(d, dict):
+            raise InputError(f"session handle: expected an object, got {type(d).__name__}")
+        name = d.get("name", "handle")
+        if not isinstance(name, str) or not name or "\0" in name:
+            raise InputError(f"session handle: 'name' must be a non-empty string, got {name!r:.40}")
+        where = f"session handle {name!r}"
+        if "vertices" not in d:
+            raise InputError(f"{where}: no 'vertices'")
+        idx = validate.handle_indices(d["vertices"], n_vertices, f"{where}: 'vertices'")
+        key = "anchor" if "anchor" in d else "targets"
+        if key not in d:
+            raise InputError(f"{where}: needs 'anchor' or 'targets'")
+        anchor = validate.real_array(d[key], f"{where}: {key!r}")
         if anchor.shape != (idx.size, 3):
-            raise InputError(f"session handle {name!r}: expected {idx.size} anchor/target rows")
+            raise InputError(f"{where}: expected {idx.size} {key} rows of 3, got {anchor.shape}")
+        validate.check_finite_positions(anchor, f"{where}: {key!r}")
         h = cls.create(name, idx, anchor)
-        if "wxyz" in d and "position" in d:
-            h.wxyz = np.asarray(d["wxyz"], dtype=np.float64).reshape(4)
-            h.position = np.asarray(d["position"], dtype=np.float64).reshape(3)
-        h.frozen = bool(d.get("frozen", False))
+        if "wxyz" in d or "position" in d:
+            h.wxyz = validate.quaternion(d.get("wxyz", [1, 0, 0, 0]), f"{where}: 'wxyz'")
+            h.position = validate.vec3(d.get("position", h.position.tolist()),
+                                       f"{where}: 'position'")
+        frozen = d.get("frozen", False)
+        if not isinstance(frozen, bool):
+            raise InputError(f"{where}: 'frozen' must be true or false, got {frozen!r:.40}")
+        h.frozen = frozen
+        with np.errstate(over="ignore", invalid="ignore"):
+            finite = np.isfinite(h.targets()).all()
+        if not finite:
+            raise InputError(f"{where}: its targets are beyond double precision (too large)")
         return h
 
 
@@ -272,10 +293,26 @@ class SolverSettings:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> SolverSettings:
-        known = {f.name for f in dataclasses.fields(cls)}
-        s = cls(**{k: v for k, v in d.items() if k in known})
-        if s.method not in METHODS:
-            raise InputError(f"session solver method {s.method!r}: expected one of {METHODS}")
+        """Settings from a session's ``solver`` object, each field checked.
+
+        Examples
+        --------
+        >>> SolverSettings.from_dict({"tol": 1e-4}).tol
+        0.0001
+        """
+        known = [f.name for f in dataclasses.fields(cls)]
+        validate.keys_of(d, known, "session solver")
+        s = cls(**d)
+        if not isinstance(s.method, str) or s.method not in METHODS:
+            raise InputError(f"session solver: method {s.method!r:.40}: expected one of {METHODS}")
+        if not isinstance(s.weights, str) or s.weights not in WEIGHT_KINDS:
+            raise InputError(f"session solver: weights {s.weights!r:.40}: expected one of "
+                             f"{', '.join(WEIGHT_KINDS)}")
+        s.tol = validate.tolerance(s.tol, "session solver: tol")
+        s.max_iter = validate.iteration_cap(s.max_iter, "session solver: max_iter")
+        s.live_max_iter = validate.iteration_cap(s.live_max_iter, "session solver: live_max_iter")
+        s.live_budget_ms = validate.number(s.live_budget_ms, "session solver: live_budget_ms",
+                                           lo=0.0, hi=3.6e6)
         return s
 
 
@@ -322,16 +359,9 @@ class EditorState:
     def n(self) -> int:
         return int(self.mesh.n_vertices)
 
-    def _check_rings(self, rings: int | np.ndarray) -> np.ndarray:
-        arr = np.asarray(rings)
-        if arr.ndim == 0:
-            arr = np.full(self.n, int(arr), dtype=np.int64)
-        arr = arr.astype(np.int64).reshape(-1)
-        if arr.size != self.n:
-            raise InputError(f"rings: {arr.size} values for a mesh of {self.n} vertices")
-        if arr.min(initial=1) < 1:
-            raise InputError(f"rings: vertex {int(np.argmin(arr))} has r < 1")
-        return arr
+    def _check_rings(self, rings: int | np.ndarray, source: str = "rings") -> np.ndarray:
+        # the library's one rule (1..MAX_RINGS), as for the command line and rings files
+        return validate.ring_sizes(rings, self.n, source).astype(np.int64)
 
     # ---------------------------------------------------------------- undo / redo
     def _snapshot(self) -> _Snapshot:
@@ -516,12 +546,16 @@ class EditorState:
         h = self.handle(name)
         if h.frozen:
             return False
+        # checked before anything changes: a bad pose leaves the handle as it was
+        q = None if wxyz is None else validate.quaternion(list(wxyz), f"handle {name!r}: wxyz")
+        p = None if position is None else validate.vec3(list(position),
+                                                         f"handle {name!r}: position")
         if record:
             self.checkpoint()
-        if wxyz is not None:
-            h.wxyz = np.asarray(wxyz, dtype=np.float64).reshape(4)
-        if position is not None:
-            h.position = np.asarray(position, dtype=np.float64).reshape(3)
+        if q is not None:
+            h.wxyz = q
+        if p is not None:
+            h.position = p
         return True
 
     def add_handle_set(self, handle_set: Any, record: bool = True) -> list[Handle]:
@@ -557,8 +591,9 @@ class EditorState:
     # ---------------------------------------------------------------- rigidity
     def set_global_rings(self, r: int) -> None:
         """Give every vertex the same ``r``."""
+        new = self._check_rings(validate.ring_size(r, "global r"))
         self.checkpoint()
-        self.rings = self._check_rings(int(r))
+        self.rings = new
 
     def load_rings(self, rings: np.ndarray) -> None:
         """Replace the rigidity map (e.g. a learned rings file)."""
@@ -601,9 +636,7 @@ class EditorState:
         return np.sort(order.astype(np.int64))
 
     def _assign(self, idx: np.ndarray, r: int, record: bool) -> int:
-        r = int(r)
-        if r < 1:
-            raise InputError(f"paint: r must be >= 1, got {r}")
+        r = validate.ring_size(r, "paint r")
         changed = int(np.count_nonzero(self.rings[idx] != r))
         if changed == 0:
             return 0
@@ -635,22 +668,34 @@ class EditorState:
         }
 
     def apply_dict(self, d: dict[str, Any], record: bool = True) -> None:
-        """Load handles, rings and settings from a session dict made for this mesh."""
+        """Load handles, rings and settings from a session dict made for this mesh.
+
+        Everything is checked before anything changes, so a bad session leaves the editor
+        as it was.
+        """
+        if not isinstance(d, dict):
+            raise InputError(f"session: expected a JSON object, got {type(d).__name__}")
         if d.get("format") != SESSION_FORMAT:
-            raise InputError(f"session: not an arapkit editor session (format={d.get('format')!r})")
-        if int(d.get("n_vertices", -1)) != self.n:
             raise InputError(
-                f"session: made for a mesh of {d.get('n_vertices')} vertices, "
+                f"session: not an arapkit editor session (format={d.get('format')!r:.40})")
+        n_vertices = d.get("n_vertices", -1)
+        if (not isinstance(n_vertices, int) or isinstance(n_vertices, bool)
+                or n_vertices != self.n):
+            raise InputError(
+                f"session: made for a mesh of {n_vertices!r:.40} vertices, "
                 f"the loaded mesh has {self.n}"
             )
-        handles = [Handle.from_dict(h, self.n) for h in d.get("handles", [])]
+        raw = d.get("handles", [])
+        if not isinstance(raw, list):
+            raise InputError(f"session: 'handles' must be a list, got {type(raw).__name__}")
+        handles = [Handle.from_dict(h, self.n) for h in raw]
         names = [h.name for h in handles]
         if len(set(names)) != len(names):
             raise InputError("session: two handles have the same name")
         all_idx = np.concatenate([h.vertices for h in handles]) if handles else np.zeros(0)
         if np.unique(all_idx).size != all_idx.size:
             raise InputError("session: a vertex belongs to two handles")
-        rings = self._check_rings(d["rings"]) if "rings" in d else self.rings
+        rings = self._check_rings(d["rings"], "session rings") if "rings" in d else self.rings
         settings = SolverSettings.from_dict(d.get("solver", {}))
         if record:
             self.checkpoint()
@@ -668,9 +713,16 @@ class EditorState:
     def read_session(path: str | os.PathLike[str]) -> dict[str, Any]:
         """Parse a session file, with a one-line error for a bad one."""
         try:
-            d = json.loads(Path(path).read_text(encoding="utf-8"))
-        except (OSError, UnicodeDecodeError, json.JSONDecodeError) as exc:
-            raise InputError(f"{path}: cannot read session ({exc})") from None
+            text = Path(path).read_bytes()
+        except OSError as exc:
+            raise InputError(f"{path}: cannot read session ({exc.strerror or exc})") from None
+        except ValueError:  # the OS refuses names with a NUL byte
+            raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)") from None
+        try:
+            d = validate.parse_json(text, str(path))
+        except InputError as exc:
+            why = str(exc).removeprefix(f"{path}: ")
+            raise InputError(f"{path}: cannot read session ({why})") from None
         if not isinstance(d, dict):
             raise InputError(f"{path}: a session must be a JSON object")
         return d
@@ -684,6 +736,8 @@ class EditorState:
         mesh_path = d.get("mesh")
         if not mesh_path:
             raise InputError(f"{path}: the session names no mesh file")
+        if not isinstance(mesh_path, str) or "\0" in mesh_path:
+            raise InputError(f"{path}: 'mesh' must be a file name, got {mesh_path!r:.60}")
         mesh_file = Path(path).parent / mesh_path
         mesh = load_mesh(str(mesh_file))
         if d.get("weld") is not None:

@@ -188,8 +188,9 @@ class SolveWorker:
 
     def reset_shape(self, vertices: np.ndarray | None, mesh: Any = None) -> None:
         """Set the warm start for the next solve (e.g. after loading another mesh)."""
+        V = None if vertices is None else np.array(vertices, dtype=np.float64)
         with self._cond:
-            self._shape = None if vertices is None else np.array(vertices, dtype=np.float64)
+            self._shape = V if V is None or np.isfinite(V).all() else None
             self._shape_mesh = mesh
 
     def wait_idle(self, timeout: float = 30.0) -> bool:
@@ -233,8 +234,11 @@ class SolveWorker:
                     self._cond.notify_all()
 
     def _start_shape(self, req: SolveRequest) -> np.ndarray:
+        # a non-finite shape is never a start: it would poison every later solve
         if req.init is not None:
-            return np.asarray(req.init, dtype=np.float64)
+            init = np.asarray(req.init, dtype=np.float64)
+            if init.shape == req.mesh.vertices.shape and np.isfinite(init).all():
+                return init
         if self._shape is not None and self._shape_mesh is req.mesh:
             return self._shape
         return np.asarray(req.mesh.vertices, dtype=np.float64)
@@ -264,6 +268,11 @@ class SolveWorker:
         ed = self._engine.laplacian_editor(req)
         setup = (time.perf_counter() - t0) * 1e3
         V = np.asarray(ed.solve(req.targets), dtype=np.float64)
+        if not np.isfinite(V).all():
+            from arapkit.errors import InputError
+
+            raise InputError("targets too large for double precision: the solve produced "
+                             "non-finite positions")
         self._keep(req, V)
         self._emit(req, V, np.nan, 1, True, True, setup_ms=setup)
         self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
@@ -310,7 +319,8 @@ class SolveWorker:
             self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
 
     def _keep(self, req: SolveRequest, V: np.ndarray) -> None:
-        self._shape, self._shape_mesh = V, req.mesh
+        if np.isfinite(V).all():  # the solver refuses non-finite results; never keep one
+            self._shape, self._shape_mesh = V, req.mesh
 
 
 def _is_input_error(exc: BaseException) -> bool:
