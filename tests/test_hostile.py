@@ -330,7 +330,7 @@ def test_check_output_path_leaves_nothing_behind(tmp_path):
 
 def test_mesh_faces_flattened_or_wrong_types(mesh):
     V, F = mesh.vertices, mesh.faces
-    with pytest.raises(InputError, match=r"faces must have shape \(m, 3\)"):
+    with pytest.raises(InputError, match=r"faces must be an \(m, 3\) array"):
         Mesh(V, F.ravel())
     with pytest.raises(InputError, match="vertices: expected real numbers, got <U"):
         Mesh(V.astype(str), F)
@@ -342,7 +342,7 @@ def test_mesh_faces_flattened_or_wrong_types(mesh):
         Mesh([[0, 0, 0], [1, 0, "0"], [0, 1, 0]], [[0, 1, 2]])
     with pytest.raises(InputError, match="face 0 references vertex 1e\\+23"):
         Mesh(V, [[0, 1, 10**23]])
-    with pytest.raises(InputError, match="faces must be a list"):
+    with pytest.raises(InputError, match="faces must be an \\(m, 3\\) array or a list of polygons"):
         Mesh(V, 5)
 
 

@@ -77,9 +77,9 @@ def test_messages_on_the_command_line(tmp_path):
     ("vertices", "faces", "pattern"),
     [
         (np.eye(3), np.array([0, 1, 2]), r"m: faces must be an \(m, 3\) array .* shape \(3,\)"),
-        (np.eye(3).astype(str), [[0, 1, 2]], "m: vertices must be real numbers, got text"),
-        (np.eye(3) + 1j, [[0, 1, 2]], "m: vertices must be real numbers, got complex"),
-        (np.eye(3) > 0, [[0, 1, 2]], "m: vertices must be real numbers, got boolean"),
+        (np.eye(3).astype(str), [[0, 1, 2]], "m: vertices: expected real numbers, got <U"),
+        (np.eye(3) + 1j, [[0, 1, 2]], "m: vertices: expected real numbers, got complex"),
+        (np.eye(3) > 0, [[0, 1, 2]], "m: vertices: expected numbers, got booleans"),
         (np.eye(3), 5, r"m: faces must be an \(m, 3\) array or a list of polygons"),
     ],
 )

@@ -178,22 +178,9 @@ class Mesh:
 
     # -- validation -------------------------------------------------------
     def _check_vertices(self, vertices) -> np.ndarray:
-        try:
-            raw = np.asarray(vertices)
-        except (TypeError, ValueError) as exc:
-            raise InputError(f"{self.name}: vertices are not numeric ({exc})") from None
-        # numpy would parse strings and drop imaginary parts without a word
-        real = raw.dtype.kind in "iuf" or (raw.dtype.kind == "O" and all(
-            isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool)
-            for x in raw.ravel()))
-        if not real:
-            kind = {"U": "text", "S": "text", "c": "complex", "b": "boolean"}.get(
-                raw.dtype.kind, "non-numeric")
-            raise InputError(f"{self.name}: vertices must be real numbers, got {kind} values")
-        try:
-            V = np.array(raw, dtype=np.float64)
-        except (TypeError, ValueError) as exc:
-            raise InputError(f"{self.name}: vertices are not numeric ({exc})") from None
+        # one rule for every entry point: text, objects, complex numbers and booleans are
+        # refused (numpy would parse strings and drop imaginary parts without a word)
+        V = np.array(real_array(vertices, f"{self.name}: vertices"), dtype=np.float64)
         if V.ndim != 2 or V.shape[1] != 3:
             raise InputError(f"{self.name}: vertices must have shape (n, 3), got {V.shape}")
         if len(V) == 0:

@@ -186,7 +186,7 @@ def expand_frames(items: list[str]) -> list[str]:
     return paths
 
 
-def _load_npz(path: str) -> Frames:
+def _load_npz(path: str, alone: bool = True) -> Frames:
     try:
         with np.load(path, allow_pickle=False) as data:
             if "V" not in data or "F" not in data:
@@ -201,7 +201,7 @@ def _load_npz(path: str) -> Frames:
         raise InputError(f"{path}: 'V' must have shape (frames, vertices, 3), got {V.shape}")
     if F.ndim != 2 or F.shape[1] != 3:
         raise InputError(f"{path}: 'F' must have shape (triangles, 3), got {F.shape}")
-    if len(V) < 2:
+    if len(V) < (2 if alone else 1):
         raise InputError(f"{path}: holds {len(V)} frame(s); learning needs at least two "
                          "(a reference and an example)")
     V = real_array(V, f"{path}: 'V'")
@@ -236,7 +236,8 @@ def _sequence_paths(items: list[str]) -> list[list[str]]:
 
 
 def _load_npz_sequences(paths: list[str]) -> Frames:
-    parts = [_load_npz(p) for p in paths]
+    # one sequence must hold two frames; several may hold one each (the first is the reference)
+    parts = [_load_npz(p, alone=len(paths) == 1) for p in paths]
     F = parts[0].faces
     for p, part in zip(paths[1:], parts[1:], strict=True):
         if part.faces.shape != F.shape or not np.array_equal(part.faces, F):
