@@ -511,3 +511,28 @@ def test_scheduler_and_two_worker_processes(data):
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait(timeout=20)
+
+
+def test_dry_run_counts_groups_without_dask_or_output(data, capsys, monkeypatch):
+    """--dry-run resolves each job's handles (counts taken here from the box selections and
+    the .sel file), reports an unreadable job as failed and writes nothing; Dask is not
+    needed."""
+    from arapkit import batch
+
+    folder, mesh, jobs = data
+    jobs = [*jobs[:2], {"mesh": "broken.off", "handles": "bend.json", "output": "broken.ply"}]
+    write_lines(folder / "dry.jsonl", jobs)
+    monkeypatch.setattr(batch, "require_dask", lambda: pytest.fail("dry run needs no Dask"))
+    out = folder / "dry-out"
+    assert main(["batch", str(folder / "dry.jsonl"), "-o", str(out), "--dry-run"]) == 0
+    text = capsys.readouterr().out
+    V = mesh.vertices
+    for g in BEND:
+        lo, hi = np.array(g["box"]["min"]), np.array(g["box"]["max"])
+        count = int(np.all((V >= lo) & (V <= hi), axis=1).sum())
+        assert f"{g['name']}: {count} vertices" in text
+    fixed = int((V[:, 0] < 1e-9).sum())
+    moved = int((V[:, 0] > 7 - 1e-9).sum())
+    assert f"{fixed + moved} handle vertices" in text
+    assert "job 3 -> broken.ply: failed: " in text and "truncated" in text
+    assert not out.exists()

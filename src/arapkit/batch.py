@@ -62,6 +62,8 @@ __all__ = [
     "SUMMARY_COLUMNS",
     "augment_jobs",
     "dask_map",
+    "dry_run",
+    "job_spec",
     "job_hash",
     "load_jobs",
     "normalise_job",
@@ -217,6 +219,35 @@ rings, rings_file, weights, energy, tol, max_iter, init, accelerate, output)
     return {k: job[k] for k in JOB_KEYS}
 
 
+def job_spec(job: dict) -> DeformJob:
+    """The library's :class:`~arapkit.jobs.DeformJob` of a checked job (without ``output``)."""
+    return DeformJob(**{k: job[k] for k in JOB_KEYS if k != "output"})
+
+
+def dry_run(path: str | os.PathLike) -> list[str]:
+    """Resolve every job's mesh and handles, solve nothing: one line per job and group.
+
+    A job whose inputs cannot be read gets a ``failed: MESSAGE`` line (the others go on),
+    as it would in a real run. Needs no Dask.
+    """
+    from .cli.deform import describe_groups
+    from .jobs import load_job_inputs
+
+    lines = []
+    for i, job in enumerate(load_jobs(path), 1):
+        try:
+            inputs = load_job_inputs(job_spec(job))
+        except (InputError, OSError) as exc:
+            lines.append(f"job {i} -> {job['output']}: failed: {_one_line(exc)}")
+            continue
+        hs = inputs.handles
+        lines.append(f"job {i} -> {job['output']}: {job['mesh']} ({inputs.mesh.n_vertices} "
+                     f"vertices), {len(hs.indices)} handle vertices in {len(hs.groups)} "
+                     "group(s)")
+        lines += [f"  {line}" for line in describe_groups(inputs.mesh.vertices, hs)]
+    return lines
+
+
 def load_jobs(path: str | os.PathLike) -> list[dict]:
     """Read and check a JSON Lines job file (blank lines are ignored).
 
@@ -291,7 +322,7 @@ def job_hash(job: dict) -> str:
     >>> job_hash(a) == job_hash(dict(a)), job_hash(a) == job_hash({**a, "rings": 2})
     (True, False)
     """
-    files = DeformJob(**{k: job[k] for k in JOB_KEYS if k != "output"}).input_files()
+    files = job_spec(job).input_files()
     blob = json.dumps({"job": job, "files": [_file_stamp(f) for f in files]}, sort_keys=True)
     return hashlib.sha256(blob.encode()).hexdigest()
 
@@ -411,7 +442,7 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
             return _row(job, "skipped", "", res["iterations"], res["energy"],
                         time.perf_counter() - t0, worker)
         threads = _limit_threads(threads)
-        spec = DeformJob(**{k: job[k] for k in JOB_KEYS if k != "output"})
+        spec = job_spec(job)
         for f in spec.input_files():
             if Path(f).resolve() == output.resolve():
                 raise InputError(f"{output}: output would overwrite an input file")

@@ -58,6 +58,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    help="generate N random handle placements and moves per input mesh")
     p.add_argument("--seed", type=int, default=0, metavar="S",
                    help="random seed of --augment (default 0)")
+    p.add_argument("--dry-run", action="store_true",
+                   help="no solve (and no Dask needed): check the job file and print, per job, "
+                   "each handle group's vertex count and motion")
     p.add_argument("--quiet", "-q", action="store_true", help="no progress on stderr")
     return p
 
@@ -93,6 +96,10 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit batch``; returns 0 (all ok or skipped) or 3 (some failed)."""
     from arapkit import batch
 
+    if args.dry_run:
+        for line in batch.dry_run(_jobs(args)):
+            print(line)
+        return 0
     batch.require_dask()
     if args.scheduler and args.workers:
         raise InputError("--workers sizes the local cluster; it cannot be used with --scheduler")
