@@ -103,7 +103,7 @@ def per_iteration(mesh: Mesh, rounds: int, iters: int = 20) -> list[list]:
     data = igl_data(V, F, h, iters)
     ds = {}
     for r in (1, 3, 6):
-        ds[r] = Deformer(mesh, h, rings=r)
+        ds[r] = Deformer(mesh, h, rings=r, weights="cotan")
         ds[r].solve(T, max_iter=2, tol=0)  # factorise, compile
     f = ds[1]._factor
     rhs = np.random.default_rng(0).normal(size=(f.n, 3))
@@ -133,11 +133,11 @@ def precomputation(mesh: Mesh, rounds: int) -> list[list]:
     _ = mesh.edges  # a loaded mesh has its topology; both sides start from arrays + handles
 
     def ours(r):
-        d = Deformer(mesh, h, rings=r)
+        d = Deformer(mesh, h, rings=r, weights="cotan")
         d.prepare()
 
     def ours_raw():
-        d = Deformer(Mesh(V, F), h, rings=1)
+        d = Deformer(Mesh(V, F), h, rings=1, weights="cotan")
         d.prepare()
 
     t_igl, t1, t3, traw = [], [], [], []
@@ -188,11 +188,11 @@ def time_to_energy(mesh: Mesh, igl_iters: int = 200) -> list[list]:
     small = bar()
     hb, tb = bar_bend(small, 90)
     for acc in (False, True):  # compile both loops outside the timing
-        Deformer(small, hb, accelerate=acc).solve(tb, max_iter=8)
+        Deformer(small, hb, weights="cotan", accelerate=acc).solve(tb, max_iter=8)
     rows = []
     for acc in (False, True):
         t0 = time.perf_counter()
-        d = Deformer(mesh, h, rings=1, accelerate=acc)
+        d = Deformer(mesh, h, rings=1, weights="cotan", accelerate=acc)
         d.prepare()
         t_pre = time.perf_counter() - t0
         target = energy_at(d, T, U)
@@ -218,13 +218,14 @@ def time_to_energy(mesh: Mesh, igl_iters: int = 200) -> list[list]:
 def paper_bar() -> list[list]:
     m = bar()
     h, t = bar_bend(m, 180)
-    Deformer(m, h, rings=10).solve(t, max_iter=2)  # compile outside the timing
+    # compile outside the timing
+    Deformer(m, h, rings=10, weights="cotan").solve(t, max_iter=2)
     rows = []
     for r in (1, 2, 4, 6, 10):
         best = None
         for _ in range(5):
             t0 = time.perf_counter()
-            d = Deformer(m, h, rings=r)
+            d = Deformer(m, h, rings=r, weights="cotan")
             res = d.solve(t)
             total = time.perf_counter() - t0
             if best is None or total < best[0]:
