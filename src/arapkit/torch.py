@@ -20,9 +20,8 @@ from __future__ import annotations
 
 import weakref
 
-from numpy.linalg import norm as np_norm
-
 import torch as _torch
+from numpy.linalg import norm as np_norm
 
 from arapkit.errors import InputError
 from arapkit.problem import ARAPProblem
@@ -127,7 +126,8 @@ def _pcg(apply_H, precond, g: _torch.Tensor, tol: float, max_iter: int):
     p = z.clone()
     rz = _bdot(r, z)
     it = 0
-    for it in range(1, max_iter + 1):
+    while it < max_iter:
+        it += 1
         Hp = apply_H(p)
         pHp = _bdot(p, Hp)
         alpha = _torch.where(pHp != 0, rz / pHp, _torch.zeros_like(rz))
@@ -236,7 +236,7 @@ class ARAPLayer(_torch.nn.Module):
         return self.system.dtype
 
     def forward(self, targets: _torch.Tensor) -> _torch.Tensor:
-        """Deformed vertices ``(n, 3)`` (or ``(B, n, 3)``) for targets ``(h, 3)`` (``(B, h, 3)``)."""
+        """Deformed vertices ``(n, 3)`` or ``(B, n, 3)`` for targets ``(h, 3)`` or ``(B, h, 3)``."""
         T, batched = _check_targets(targets, self.system, self.handles)
         X = _ARAPSolve.apply(T, self)
         return X if batched else X[0]
@@ -315,7 +315,7 @@ def arap_energy(X: _torch.Tensor, layer_or_problem: ARAPLayer | ARAPProblem) -> 
     >>> mesh = bar(segments=(10, 2, 2))
     >>> p = ARAPProblem.from_mesh(mesh, [0], rings=2)
     >>> X = torch.tensor(mesh.vertices, requires_grad=True)
-    >>> float(arap_energy(X, p)) < 1e-20
+    >>> arap_energy(X, p).item() < 1e-20
     True
     >>> E = arap_energy(X * 1.1, p)
     >>> E.backward()

@@ -193,6 +193,12 @@ class TorchSystem:
         self.disk_k = t(np.repeat(np.arange(n), sizes), long)
         self.disk_v = t(nbh.disk_idx, long)
         self.disk_coef = t(nbh.disk_coef)
+        # C[3k + a, v] = c_kv[a]: covariances are C P, right-hand sides C^T R
+        rows = (self.disk_k[:, None] * 3 + torch.arange(3, device=self.device)).reshape(-1)
+        cols = self.disk_v[:, None].expand(-1, 3).reshape(-1)
+        self.C = torch.sparse_coo_tensor(torch.stack([rows, cols]), self.disk_coef.reshape(-1),
+                                         (3 * n, n), check_invariants=False).coalesce()
+        self.CT = self.C.t().coalesce()
         E = problem.edges
         self.edges = t(E, long)
         self.system_w = t(en.system_w)
@@ -310,15 +316,16 @@ class TorchSystem:
 
     # -- the local step -------------------------------------------------------------
     def covariances(self, P: torch.Tensor, R_prev: torch.Tensor | None = None) -> torch.Tensor:
-        """``S_k = sum_v c_kv (p'_v - p'_k)^T`` for ``(B, n, 3)`` -> ``(B, n, 3, 3)``.
+        """``S_k = sum_v c_kv p'_v^T`` for ``(B, n, 3)`` -> ``(B, n, 3, 3)``.
 
-        Subtracting ``p'_k`` is exact (the ``c_kv`` of a neighbourhood sum to zero) and
-        keeps float32 sums well conditioned far from the origin. A rotation coupling adds
-        ``sum_j c_kj R_prev[j]^T``.
+        One sparse product ``C P`` for the whole batch (C is ``(3n, n)``, row ``3k + a``
+        holding ``c_kv[a]``). The positions are centred first: the ``c_kv`` of a
+        neighbourhood sum to zero, so this is exact and keeps float32 sums well conditioned
+        far from the origin. A rotation coupling adds ``sum_j c_kj R_prev[j]^T``.
         """
-        d = P[:, self.disk_v] - P[:, self.disk_k]
-        outer = self.disk_coef[None, :, :, None] * d[:, :, None, :]
-        S = P.new_zeros(P.shape[0], self.n, 3, 3).index_add_(1, self.disk_k, outer)
+        B = P.shape[0]
+        Pc = (P - P.mean(dim=1, keepdim=True)).permute(1, 0, 2).reshape(self.n, 3 * B)
+        S = torch.sparse.mm(self.C, Pc).reshape(self.n, 3, B, 3).permute(2, 0, 1, 3)
         if self.rc_k is not None and R_prev is not None:
             RT = R_prev[:, self.rc_j].transpose(-1, -2) * self.rc_w[None, :, None, None]
             S = S.index_add(1, self.rc_k, RT)
@@ -329,9 +336,13 @@ class TorchSystem:
         return fit_rotations(self.covariances(P))
 
     def rhs(self, R: torch.Tensor) -> torch.Tensor:
-        """``b_v = sum_k R_k c_kv`` for rotations ``(B, n, 3, 3)`` -> ``(B, n, 3)``."""
-        contrib = (R[:, self.disk_k] @ self.disk_coef[None, :, :, None])[..., 0]
-        return R.new_zeros(R.shape[0], self.n, 3).index_add_(1, self.disk_v, contrib)
+        """``b_v = sum_k R_k c_kv`` for rotations ``(B, n, 3, 3)`` -> ``(B, n, 3)``.
+
+        One sparse product ``C^T R`` for the whole batch.
+        """
+        B = R.shape[0]
+        Rr = R.permute(1, 3, 0, 2).reshape(3 * self.n, 3 * B)
+        return torch.sparse.mm(self.CT, Rr).reshape(self.n, B, 3).permute(1, 0, 2)
 
     def vertex_energy(self, P: torch.Tensor, R: torch.Tensor) -> torch.Tensor:
         """Each neighbourhood's term ``(B, n)``, summed edge by edge (a sum of squares)."""
