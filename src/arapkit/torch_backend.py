@@ -27,6 +27,9 @@ at the repeated ones that symmetric rest neighbourhoods have.
 
 from __future__ import annotations
 
+import atexit
+import weakref
+
 import numpy as np
 import torch
 
@@ -40,6 +43,25 @@ _CUDA_MAX_RHS = 128
 
 _CUDA_REMEDY = ("install a CUDA build of torch (pip install 'arapkit[torch]' on a machine "
                 "with an NVIDIA driver) or use device='cpu'")
+
+
+_LIVE: weakref.WeakSet = weakref.WeakSet()
+
+
+@atexit.register
+def _release_factors() -> None:
+    """Drop the cholespy factors before interpreter shutdown.
+
+    Autograd contexts keep layers (and their factors) alive until the very end, after
+    nanobind has checked for live instances, which then prints a "leaked instances" report.
+    """
+    for system in list(_LIVE):
+        system._factor = None
+        # the problem's own (CPU) factor is kept alive by the same contexts
+        for problem in (system.problem, system._bound):
+            el = problem.__dict__.get("elimination") if problem is not None else None
+            if el is not None and el.factor is not None:
+                el.factor._solver = None
 
 
 def resolve_device(device) -> torch.device:
@@ -224,6 +246,8 @@ class TorchSystem:
         self.energy_obj = en
         self.problem = problem
         self._bound: ARAPProblem | None = None
+        self._factor = None
+        _LIVE.add(self)
 
     # -- constraints and the factor ------------------------------------------------
     def bind(self, problem: ARAPProblem) -> TorchSystem:
