@@ -25,7 +25,7 @@ from numpy.linalg import norm as np_norm
 
 from arapkit.errors import InputError
 from arapkit.problem import ARAPProblem
-from arapkit.torch_backend import TorchSystem, _svd_rotation, check_dtype, fit_rotations
+from arapkit.torch_backend import TorchSystem, best_rotations, check_dtype, fit_rotations
 from arapkit.weights import DEFAULT_WEIGHTS
 
 __all__ = ["ARAPLayer", "arap_energy"]
@@ -257,7 +257,7 @@ class ARAPLayer(_torch.nn.Module):
             x, x_prev = ts.solve(rhs), x
             P = ts.assemble(x, C)
             S = ts.covariances(P)
-            R, _, _ = _svd_rotation(S)
+            R = best_rotations(S)
             E = ts.energy_expanded(P, R, S)
             # relative decrease, as arapkit.loop; every pose of the batch must pass
             if E_prev is not None:
@@ -344,6 +344,6 @@ def arap_energy(X: _torch.Tensor, layer_or_problem: ARAPLayer | ARAPProblem) -> 
     ts = _system_for(problem, X)
     P = (X if X.ndim == 3 else X[None])[:, ts.perm]
     with _torch.no_grad():
-        R, _, _ = _svd_rotation(ts.covariances(P))
+        R = best_rotations(ts.covariances(P))
     E = ts.energy(P, R)
     return E if X.ndim == 3 else E[0]

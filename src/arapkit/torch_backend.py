@@ -36,7 +36,7 @@ import torch
 from .errors import InputError
 from .problem import ARAPProblem
 
-__all__ = ["TorchBackend", "TorchSystem", "fit_rotations", "resolve_device"]
+__all__ = ["TorchBackend", "TorchSystem", "best_rotations", "fit_rotations", "resolve_device"]
 
 #: cholespy's CUDA solver takes at most this many right-hand sides per call
 _CUDA_MAX_RHS = 128
@@ -148,6 +148,29 @@ class _PolarRotation(torch.autograd.Function):
         den = torch.where(den.abs() > tiny, den, torch.full_like(den, float("inf")))
         K = (H.transpose(-1, -2) - H) / den
         return R.transpose(-1, -2) @ V @ K @ Vt
+
+
+def best_rotations(S: torch.Tensor) -> torch.Tensor:
+    """Rotations of covariances ``(..., 3, 3)`` without a derivative (the forward loop).
+
+    On CPU tensors the compiled kernel of :mod:`arapkit.rotations` (vectorised across
+    matrices; ~5-10x faster than ``torch.linalg.svd``, which makes one LAPACK call per
+    3x3 matrix); on CUDA the batched SVD of :func:`_svd_rotation`. Both return the same
+    rotations (to round-off) wherever the optimum is unique.
+
+    Examples
+    --------
+    >>> import torch
+    >>> S = torch.diag(torch.tensor([3.0, 2.0, -1.0]))[None]
+    >>> best_rotations(S)[0].diag().tolist()  # det S < 0, yet a rotation: the identity
+    [1.0, 1.0, 1.0]
+    """
+    if S.device.type == "cpu":
+        from .rotations import fit_rotations as fit_numpy
+
+        R = fit_numpy(S.detach().reshape(-1, 3, 3).to(torch.float64).numpy())
+        return torch.from_numpy(R).to(S.dtype).reshape(S.shape)
+    return _svd_rotation(S.detach())[0]
 
 
 def fit_rotations(S: torch.Tensor) -> torch.Tensor:
@@ -430,7 +453,7 @@ class TorchBackend:
         Pt = self._t(P)[None]
         Rp = self._t(R_prev)[None] if R_prev is not None and len(R_prev) else None
         S = ts.covariances(Pt, Rp)
-        Rt, _, _ = _svd_rotation(S)
+        Rt = best_rotations(S)
         R[:] = Rt[0].cpu().numpy()
         self._b = ts.rhs(Rt)[0]
         # a rotation coupling's terms are in S and its constant in rest_term, as on the CPU
