@@ -62,13 +62,17 @@ def cpu_batch(rounds: int, iters: int, converge: bool) -> list[list]:
     h, T = poses(mesh, 16)
     rows = []
     dev = torch.device("cpu")
+    d = Deformer(mesh, h)
+    d.solve(T[0], max_iter=1, tol=0)
+    numba = timed(lambda: d.solve(T[0], max_iter=iters, tol=0), rounds, dev) / iters
+    rows.append(["numba Deformer, float64", mesh.n_vertices, f"{1e3 * numba:.0f}", "", ""])
     for dtype in (torch.float64, torch.float32):
         fixed = ARAPLayer(mesh, h, dtype=dtype, tol=0.0, max_iter=iters)
         one, many = torch.tensor(T[0], dtype=dtype), torch.tensor(T, dtype=dtype)
         fixed(one)  # warm-up
         t1 = timed(lambda m=fixed, x=one: m(x), rounds, dev) / iters
         t16 = timed(lambda m=fixed, x=many: m(x), rounds, dev) / iters
-        row = [str(dtype).replace("torch.", ""), mesh.n_vertices, f"{1e3 * t1:.0f}",
+        row = [f"ARAPLayer, {str(dtype).replace('torch.', '')}", mesh.n_vertices, f"{1e3 * t1:.0f}",
                f"{1e3 * t16:.0f}", f"{t16 / t1:.1f}x"]
         if converge:  # to the default tolerance: the batch runs until every pose passes
             conv = ARAPLayer(mesh, h, dtype=dtype)
@@ -78,6 +82,8 @@ def cpu_batch(rounds: int, iters: int, converge: bool) -> list[list]:
             it16 = conv.last_info["iterations"]
             row += [f"{s1:.1f} ({it1} it)", f"{s16:.1f} ({it16} it)", f"{s16 / s1:.1f}x"]
         rows.append(row)
+    if converge:
+        rows[0] += ["", "", ""]
     return rows
 
 
@@ -135,7 +141,7 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     print(f"torch {torch.__version__}, {torch.get_num_threads()} CPU threads, "
           f"CUDA: {torch.cuda.get_device_name(0) if torch.cuda.is_available() else 'none'}")
-    head = ["dtype", "n", "ms/it, 1 pose", "ms/it, 16 poses", "ratio"]
+    head = ["solver", "n", "ms/it, 1 pose", "ms/it, 16 poses", "ratio"]
     if a.converge:
         head += ["s to tol 1e-3, 1 pose", "s, 16 poses", "ratio"]
     table("1. CPU: batch of 16 target sets vs one solve (bunny00.off, r = 1)", head,
