@@ -49,20 +49,48 @@ __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "Cholesky
            "bandwidth_order", "check_method", "unit_scale"]
 
 INITS = ("identity", "laplacian")
-DEVICES = ("cpu", "auto")
+DEVICES = ("cpu", "auto", "cuda", "cuda:N", "torch-cpu")
 
 
 def _check_device(device: str) -> str:
-    """Resolve ``device``; only the CPU path exists (the GPU path is not built)."""
+    """Resolve ``device`` to "cpu" (numba), "torch-cpu", "cuda" or "cuda:N" (torch backend).
+
+    ``"auto"`` is CUDA when torch is installed and sees a device, else the numba CPU path.
+    The torch devices need the extra ``arapkit[torch]``; without it (or without CUDA) the
+    error names the remedy.
+    """
+    from importlib.util import find_spec
+
     dev = str(device).lower()
-    if dev in DEVICES:
+    if dev == "cpu":
         return "cpu"
-    if dev in ("cuda", "gpu") or dev.startswith("cuda:"):
-        raise InputError(
-            f"device='{device}': no GPU solver is available in this build of arapkit "
-            "(the CUDA path is not implemented); use device='cpu' or device='auto'"
-        )
-    raise InputError(f"unknown device '{device}' (use 'cpu' or 'auto')")
+    if dev == "auto":
+        if find_spec("torch") is None:
+            return "cpu"
+        import torch
+
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    if dev == "gpu":
+        dev = "cuda"
+    if dev in ("cuda", "torch-cpu") or dev.startswith("cuda:"):
+        if find_spec("torch") is None:
+            raise InputError(f"device='{device}' needs PyTorch: pip install 'arapkit[torch]' "
+                             "(a CUDA build for a GPU), or use device='cpu'")
+        from .torch_backend import resolve_device
+
+        resolve_device("cpu" if dev == "torch-cpu" else dev)
+        return dev
+    raise InputError(f"unknown device '{device}' (use 'cpu', 'auto', 'cuda', 'cuda:N' or "
+                     "'torch-cpu')")
+
+
+def _make_backend(problem: ARAPProblem, device: str):
+    """The backend for a resolved device: numba kernels on "cpu", torch tensors otherwise."""
+    if device == "cpu":
+        return CPUBackend(problem)
+    from .torch_backend import TorchBackend
+
+    return TorchBackend(problem, "cpu" if device == "torch-cpu" else device)
 
 
 def check_method(energy: str, sr_alpha=None, nodes=None) -> dict:
@@ -140,8 +168,11 @@ class Deformer:
     reorder : bool
         Work internally in a bandwidth-reducing vertex order (results are returned in the
         mesh's order and agree with ``reorder=False`` to round-off).
-    device : {"cpu", "auto"}
-        Where to solve. Only the CPU path exists; "cuda" raises :class:`InputError`.
+    device : {"cpu", "auto", "cuda", "cuda:N", "torch-cpu"}
+        Where to solve: "cpu" runs the numba kernels; "cuda" (and "torch-cpu", the same
+        code on CPU tensors) the torch backend of :mod:`arapkit.torch_backend` (extra
+        ``arapkit[torch]``; see ``docs/torch.md``); "auto" is "cuda" when torch sees a
+        device, else "cpu".
     volumetric : bool
         Fill the closed surface with tetrahedra and solve r-ring ARAP on the volume's edge
         graph (the course report's "inner edges"); the result is still the surface's. This
@@ -235,7 +266,7 @@ class Deformer:
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
             reorder=reorder, **options)
         self._rings = self.problem.energy.rings[self.problem.iperm]
-        self.backend = CPUBackend(self.problem)
+        self.backend = _make_backend(self.problem, self.device)
         self._weight_notes = self._check_rest_is_minimum()
 
     # -- configuration (lazy refactorisation, as CGAL) -----------------------------
@@ -257,7 +288,7 @@ class Deformer:
                 raise InputError(f"energy '{self.energy}' has no rigidity map (rings must be 1)")
             return
         self.problem = p.with_rings(rings)
-        self.backend = CPUBackend(self.problem)
+        self.backend = _make_backend(self.problem, self.device)
         self._rings = self.problem.energy.rings[self.problem.iperm]
         self._weight_notes = self._check_rest_is_minimum()
 
@@ -371,7 +402,7 @@ class Deformer:
             return
         if self.backend.problem is not self.problem or not self.problem.factorised:
             if self.backend.problem.energy is not self.problem.energy:
-                self.backend = CPUBackend(self.problem)
+                self.backend = _make_backend(self.problem, self.device)
             was = self.problem.factorised
             self.backend.bind(self.problem)
             if not was and self.problem.elimination.factor is not None:

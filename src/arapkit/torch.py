@@ -1,0 +1,354 @@
+"""PyTorch layer and loss: differentiable r-ring ARAP on CPU or CUDA tensors.
+
+Needs the optional extra ``pip install 'arapkit[torch]'``.
+
+* :class:`ARAPLayer`: ``X = layer(targets)`` solves ARAP for handle targets ``(h, 3)`` or a
+  batch ``(B, h, 3)``; a batch is solved together (all ``3B`` right-hand sides in one
+  triangular solve per iteration). Its backward is implicit differentiation at the
+  converged solution, not unrolled iterations (see :class:`_ARAPSolve`).
+* :func:`arap_energy`: eq. 1 of Chen et al. 2017 with optimal rotations, differentiable in
+  the positions: the drop-in "ARAP loss".
+
+What is differentiated: the handle *targets* (the layer) or the positions (the energy).
+Held fixed: the rest shape, the edge weights, the rigidity map r, the handle set and the
+anchors of handle-free components (which stay at rest).
+
+Details and an example: ``docs/torch.md``.
+"""
+
+from __future__ import annotations
+
+import weakref
+
+import torch as _torch
+from numpy.linalg import norm as np_norm
+
+from arapkit.errors import InputError
+from arapkit.problem import ARAPProblem
+from arapkit.torch_backend import TorchSystem, best_rotations, check_dtype, fit_rotations
+from arapkit.weights import DEFAULT_WEIGHTS
+
+__all__ = ["ARAPLayer", "arap_energy"]
+
+
+def _check_targets(T, system: TorchSystem, handles) -> tuple[_torch.Tensor, bool]:
+    """Targets as ``(B, h, 3)`` on the layer's device and dtype; whether a batch was given."""
+    h = len(handles)
+    if not isinstance(T, _torch.Tensor):
+        raise InputError(f"targets: expected a torch.Tensor of shape ({h}, 3) or (B, {h}, 3), "
+                         f"got {type(T).__name__}")
+    if T.ndim not in (2, 3) or tuple(T.shape[-2:]) != (h, 3) or (T.ndim == 3 and not len(T)):
+        raise InputError(f"targets: expected shape ({h}, 3) or (B, {h}, 3), got "
+                         f"{tuple(T.shape)}")
+    if T.dtype != system.dtype:
+        raise InputError(f"targets: dtype {T.dtype} does not match the layer's {system.dtype} "
+                         f"(convert with .to({system.dtype}))")
+    if T.device != system.device and not (T.device.type == system.device.type == "cuda"
+                                          and system.device.index is None):
+        raise InputError(f"targets: on device {T.device}, the layer is on {system.device} "
+                         f"(move them with .to('{system.device}'))")
+    batched = T.ndim == 3
+    T3 = T if batched else T[None]
+    ok = _torch.isfinite(T3).all(dim=-1)
+    if not bool(ok.all()):
+        b, i = (int(v) for v in _torch.nonzero(~ok)[0])
+        where = f"pose {b}, " if batched else ""
+        raise InputError(f"targets: {where}handle {i} (vertex {int(handles[i])}) target is "
+                         "not finite")
+    return T3, batched
+
+
+def _bdot(a: _torch.Tensor, b: _torch.Tensor) -> _torch.Tensor:
+    """Per-batch inner product of ``(B, ...)`` tensors, shaped ``(B, 1, 1)``."""
+    return (a * b).sum(dim=(1, 2), keepdim=True)
+
+
+class _ARAPSolve(_torch.autograd.Function):
+    """Local/global solve with implicit differentiation at the converged solution.
+
+    Forward: the loop of :func:`arapkit.loop.local_global` in torch ops, batched.
+
+    Backward: the converged free positions ``x`` satisfy ``grad_x f(x, T) = 0`` for the
+    reduced energy ``f(x, T) = min_R E``, i.e. ``A x = b(x, T) - A_fc C(T)`` with
+    ``b(P) = sum_k R_k(P) c_k``, the gradient of the convex ``sum_k max_R tr(R S_k(P))``.
+    Differentiating: ``(A - B) dx = (db/dT - A_fc) dT`` with ``B = db/dx``, symmetric, so
+    ``dL/dT = (db/dT - A_fc)^T mu`` plus the direct path (the handles' own rows of the
+    output), where ``(A - B) mu = dL/dx``. ``A - B`` is half the Hessian of ``f``
+    (positive definite at a strict minimum): ``mu`` comes from conjugate gradients
+    preconditioned by the Cholesky factor of ``A``, so each CG step costs one solve with
+    the forward's factor and one vector-Jacobian product of ``b`` (through the closed-form
+    rotation derivative of :func:`arapkit.torch_backend.fit_rotations`).
+    """
+
+    @staticmethod
+    def forward(ctx, T, layer: ARAPLayer):
+        ts = layer.system
+        with _torch.no_grad():
+            x, info = layer._iterate(T)
+            P = ts.assemble(x, ts.constrained(T))
+        ctx.layer = layer
+        ctx.save_for_backward(T, x)
+        layer.last_info = info
+        return P[:, ts.iperm]
+
+    @staticmethod
+    def backward(ctx, gX):
+        layer = ctx.layer
+        ts = layer.system
+        T, x_star = ctx.saved_tensors
+        gP = gX[:, ts.perm]
+        g_free = gP[:, ts.free]
+        gT = gP[:, ts.cons[:ts.n_handles]].clone()
+        with _torch.enable_grad():
+            x = x_star.detach().requires_grad_(True)
+            Tq = T.detach().requires_grad_(True)
+            P = ts.assemble(x, ts.constrained(Tq))
+            b = ts.rhs(fit_rotations(ts.covariances(P)))[:, ts.free]
+
+            def hess(u):  # (A - B) u
+                (Bu,) = _torch.autograd.grad(b, x, u, retain_graph=True)
+                return ts.apply_A(u) - Bu
+
+            mu, layer.last_info["adjoint_iterations"] = _pcg(hess, ts.solve, g_free,
+                                                              layer.adjoint_tol,
+                                                              layer.adjoint_max_iter)
+            (gb,) = _torch.autograd.grad(b, Tq, mu)
+        gT += gb - ts.apply_A_fc_T(mu)[:, :ts.n_handles]
+        return gT, None
+
+
+def _pcg(apply_H, precond, g: _torch.Tensor, tol: float, max_iter: int):
+    """Solve ``H mu = g`` per batch element by preconditioned conjugate gradients."""
+    mu = _torch.zeros_like(g)
+    r = g.clone()
+    g_norm = _torch.sqrt(_bdot(g, g))
+    z = precond(r)
+    p = z.clone()
+    rz = _bdot(r, z)
+    it = 0
+    while it < max_iter:
+        it += 1
+        Hp = apply_H(p)
+        pHp = _bdot(p, Hp)
+        alpha = _torch.where(pHp != 0, rz / pHp, _torch.zeros_like(rz))
+        mu = mu + alpha * p
+        r = r - alpha * Hp
+        if bool((_torch.sqrt(_bdot(r, r)) <= tol * g_norm).all()):
+            break
+        z = precond(r)
+        rz_new = _bdot(r, z)
+        beta = _torch.where(rz != 0, rz_new / rz, _torch.zeros_like(rz))
+        p = z + beta * p
+        rz = rz_new
+    return mu, it
+
+
+class ARAPLayer(_torch.nn.Module):
+    """Differentiable ARAP: handle targets in, deformed vertices out.
+
+    Parameters
+    ----------
+    mesh : arapkit.Mesh
+    handles : (h,) int
+        Handle vertices; ``targets[..., i, :]`` is where ``handles[i]`` goes.
+    rings : int or (n,) int
+        r per vertex (rigidity), held fixed.
+    weights : str
+        Edge weighting (default :data:`arapkit.weights.DEFAULT_WEIGHTS`).
+    energy : {"rring", "spokes-and-rims"}
+        The local/global energy (SR-ARAP's rotation coupling has no fixed point of one
+        step alone and is not offered here).
+    tol, max_iter :
+        The forward's stopping test, as for :class:`arapkit.Deformer` (every pose of a
+        batch must pass it). Gradients are those of the exact solution: a loose ``tol``
+        gives gradients of a point near it.
+    xtol : float, optional
+        Also stop when no free vertex moved more than ``xtol`` times the rest shape's
+        bounding-box diagonal in the last iteration. The energy test is second order in
+        the positions and drowns in round-off below ``tol ~ 1e-13``; use ``xtol`` (with
+        ``tol=0``) to converge the positions tightly, e.g. for finite-difference checks.
+    dtype : torch.float32 or torch.float64
+    device : "cpu", "cuda" or "cuda:N"
+        Where the tensors and the factor live (fixed at construction; ``.to()`` does not
+        move them).
+    adjoint_tol, adjoint_max_iter :
+        Relative residual and iteration cap of the backward's conjugate gradients
+        (default 1e-10 in float64, 1e-5 in float32).
+
+    Examples
+    --------
+    >>> import torch
+    >>> from arapkit.shapes import bar, bar_bend
+    >>> mesh = bar(segments=(10, 2, 2))
+    >>> h, t = bar_bend(mesh, 45)
+    >>> layer = ARAPLayer(mesh, h, dtype=torch.float64)
+    >>> T = torch.tensor(t, requires_grad=True)
+    >>> X = layer(T)
+    >>> X.shape == (mesh.n_vertices, 3)
+    True
+    >>> X[:, 2].sum().backward()
+    >>> T.grad.shape == T.shape
+    True
+    """
+
+    def __init__(self, mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS,
+                 energy: str = "rring", tol: float = 1e-3, max_iter: int = 1000,
+                 dtype=_torch.float32, device="cpu", *, xtol: float | None = None,
+                 adjoint_tol: float | None = None,
+                 adjoint_max_iter: int = 1000) -> None:
+        super().__init__()
+        check_dtype(dtype)
+        if energy == "sr-arap":
+            raise InputError("energy 'sr-arap' is not available in ARAPLayer (its rotation "
+                             "coupling has no per-step fixed point); use 'rring' or "
+                             "'spokes-and-rims'")
+        if energy == "embedded":
+            raise InputError("energy 'embedded' is not a local/global energy; "
+                             "use 'rring' or 'spokes-and-rims'")
+        problem = ARAPProblem.from_mesh(mesh, handles, energy, weights, rings=rings)
+        self.problem = problem
+        self.system = TorchSystem(problem, device, dtype).bind(problem)
+        self.tol = float(tol)
+        self.max_iter = int(max_iter)
+        V = problem.vertices
+        self._step_tol = None if xtol is None else float(xtol) * float(
+            np_norm(V.max(axis=0) - V.min(axis=0)))
+        if self.max_iter < 1:
+            raise InputError(f"max_iter must be >= 1, got {max_iter}")
+        self.adjoint_tol = (1e-10 if dtype == _torch.float64 else 1e-5) \
+            if adjoint_tol is None else float(adjoint_tol)
+        self.adjoint_max_iter = int(adjoint_max_iter)
+        self.last_info: dict = {}
+
+    @property
+    def handles(self):
+        """Handle vertices (caller numbering)."""
+        return self.problem.handles
+
+    @property
+    def device(self) -> _torch.device:
+        """Where the layer's tensors live."""
+        return self.system.device
+
+    @property
+    def dtype(self) -> _torch.dtype:
+        """The layer's floating-point type."""
+        return self.system.dtype
+
+    def forward(self, targets: _torch.Tensor) -> _torch.Tensor:
+        """Deformed vertices ``(n, 3)`` or ``(B, n, 3)`` for targets ``(h, 3)`` or ``(B, h, 3)``."""
+        T, batched = _check_targets(targets, self.system, self.handles)
+        # the problem lives in units of problem.scale (a power of two: exact); autograd sees
+        # the two scalings as ordinary operations
+        s = self.problem.scale
+        X = _ARAPSolve.apply(T / s, self) * s
+        return X if batched else X[0]
+
+    def _iterate(self, T: _torch.Tensor) -> tuple[_torch.Tensor, dict]:
+        """The local/global loop from the rest shape (internal numbering, no autograd)."""
+        ts = self.system
+        B = T.shape[0]
+        C = ts.constrained(T)
+        fixed = ts.fixed_rhs(C)
+        rhs = ts.b_rest_free[None] - fixed
+        E_prev = None
+        floor = 1e-24 * max(abs(ts.rest_term), 1e-300)
+        converged = False
+        it = 0
+        x = ts.b_rest_free.new_zeros(B, ts.nf, 3)
+        for it in range(1, self.max_iter + 1):
+            x, x_prev = ts.solve(rhs), x
+            P = ts.assemble(x, C)
+            S = ts.covariances(P)
+            R = best_rotations(S)
+            E = ts.energy_expanded(P, R, S)
+            # relative decrease, as arapkit.loop; every pose of the batch must pass
+            if E_prev is not None:
+                rel = (E_prev - E).abs() / E_prev.abs().clamp_min(1e-300)
+                converged = bool(((rel < self.tol) | (E.abs() <= floor)).all())
+            elif bool((E.abs() <= floor).all()):
+                converged = True
+            if self._step_tol is not None and it > 1 and ts.nf:
+                converged |= bool((x - x_prev).abs().amax() <= self._step_tol)
+            if converged:
+                break
+            E_prev = E
+            rhs = ts.rhs(R)[:, ts.free] - fixed
+        s2 = self.problem.scale ** 2
+        return x, {"iterations": it, "converged": converged, "energy": E.detach() * s2}
+
+
+_SYSTEMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
+
+
+def _system_for(problem: ARAPProblem, like: _torch.Tensor) -> TorchSystem:
+    """A cached energy-only :class:`TorchSystem` of ``problem`` on ``like``'s device/dtype."""
+    per = _SYSTEMS.setdefault(problem, {})
+    key = (str(like.device), like.dtype)
+    if key not in per:
+        per[key] = TorchSystem(problem, like.device, check_dtype(like.dtype))
+    return per[key]
+
+
+def arap_energy(X: _torch.Tensor, layer_or_problem: ARAPLayer | ARAPProblem) -> _torch.Tensor:
+    """ARAP energy (eq. 1) of positions ``X`` with optimal rotations: the "ARAP loss".
+
+    ``sum_k sum_{e in N(k)} w_ke |e'_e - R_k e_e|^2`` with each ``R_k`` the best fit to X,
+    summed edge by edge. With non-negative weights (the default) it is >= 0 and 0 exactly
+    at rigid motions of the rest shape. Its gradient is ``dE/dX`` at the optimal rotations
+    (envelope theorem: the rotations' own derivative multiplies ``dE/dR = 0``), so the
+    rotations are detached; second derivatives are therefore not those of the reduced
+    energy.
+
+    Parameters
+    ----------
+    X : (n, 3) or (B, n, 3) tensor
+        Positions in the mesh's vertex order (float32 or float64, any device).
+    layer_or_problem : ARAPLayer or arapkit.problem.ARAPProblem
+        Gives the rest shape, weights, neighbourhoods (r) and energy; handles play no role.
+
+    Returns
+    -------
+    tensor of shape () or (B,)
+
+    Examples
+    --------
+    >>> import torch
+    >>> from arapkit.shapes import bar
+    >>> from arapkit.problem import ARAPProblem
+    >>> mesh = bar(segments=(10, 2, 2))
+    >>> p = ARAPProblem.from_mesh(mesh, [0], rings=2)
+    >>> X = torch.tensor(mesh.vertices, requires_grad=True)
+    >>> arap_energy(X, p).item() < 1e-20
+    True
+    >>> E = arap_energy(X * 1.1, p)
+    >>> E.backward()
+    >>> bool(E > 0) and X.grad.shape == X.shape
+    True
+    """
+    if isinstance(layer_or_problem, ARAPLayer):
+        problem = layer_or_problem.problem
+    elif isinstance(layer_or_problem, ARAPProblem):
+        problem = layer_or_problem
+    else:
+        raise InputError("arap_energy: second argument must be an ARAPLayer or an ARAPProblem, "
+                         f"got {type(layer_or_problem).__name__}")
+    if problem.energy.coupling is not None:
+        raise InputError(f"arap_energy: energy '{problem.energy.name}' couples rotations and "
+                         "has no closed-form optimal rotations; use 'rring' or "
+                         "'spokes-and-rims'")
+    n = problem.n_vertices
+    if not isinstance(X, _torch.Tensor) or X.ndim not in (2, 3) or tuple(X.shape[-2:]) != (n, 3):
+        shape = tuple(X.shape) if isinstance(X, _torch.Tensor) else type(X).__name__
+        raise InputError(f"arap_energy: expected positions of shape ({n}, 3) or (B, {n}, 3), "
+                         f"got {shape}")
+    if X.dtype not in (_torch.float32, _torch.float64):
+        raise InputError(f"arap_energy: dtype {X.dtype} is not supported "
+                         "(use torch.float32 or torch.float64)")
+    ts = _system_for(problem, X)
+    s = problem.scale  # the problem's unit (a power of two): exact
+    P = (X if X.ndim == 3 else X[None])[:, ts.perm] / s
+    with _torch.no_grad():
+        R = best_rotations(ts.covariances(P))
+    E = ts.energy(P, R) * (s * s)
+    return E if X.ndim == 3 else E[0]
