@@ -16,14 +16,16 @@ What is run (keep to these rules when you add an example):
    nothing is served.
 4. Markers, in a comment: ``# needs ../shared/data`` on a line or in a python block skips
    it when ``../shared/data`` is absent (a link to it sits next to the scratch folder, so
-   ``../shared/data`` works there too); ``# not run`` on a line never runs it (say why after
-   it). A line that pipes into a program that is not installed (``jq``) is skipped.
+   ``../shared/data`` works there too); ``# needs arapkit[torch]`` skips it when torch is
+   not installed (CI installs it); ``# not run`` on a line never runs it (say why after it).
+   A line that pipes into a program that is not installed (``jq``) is skipped.
 5. ``<!-- same-as: PATH -->`` right before a ```json block: the block must equal the
    repository file PATH, compared as parsed JSON.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import json
 import os
 import re
@@ -40,6 +42,8 @@ ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 SHARED = ROOT.parent / "shared"
 NEEDS_DATA = "# needs ../shared/data"
+#: optional extras: a block or line with the marker skips when the module is missing
+NEEDS_EXTRA = {"# needs arapkit[torch]": "torch"}
 NOT_RUN = "# not run"
 _FENCE = re.compile(r"^(\s*)```(\S*)\s*$")
 _SAME_AS = re.compile(r"<!--\s*same-as:\s*(\S+)\s*-->")
@@ -111,6 +115,9 @@ def scratch(tmp_path_factory):
 def _skip_reason(code: str) -> str | None:
     if NEEDS_DATA in code and not _has_data():
         return "needs ../shared/data, which is absent"
+    for marker, module in NEEDS_EXTRA.items():
+        if marker in code and importlib.util.find_spec(module) is None:
+            return f"needs {module} (pip install 'arapkit[{module}]'), which is not installed"
     if NOT_RUN in code:
         return "marked '# not run'"
     if "|" in code:
