@@ -27,7 +27,8 @@ def main(argv: list[str]) -> int:
 
     from arapkit import Deformer, load_mesh
     from arapkit.handles import load_handles
-    from arapkit.plots import render_mesh, save_figure, view_basis
+    from arapkit.orientation import view_frame
+    from arapkit.plots import render_mesh, save_figure
     from arapkit.volume import VolumetricDeformer, mesh_volume
 
     sys.path.insert(0, str(ROOT / "tests"))
@@ -41,7 +42,7 @@ def main(argv: list[str]) -> int:
         "surface ARAP": Deformer(mesh, hs.indices).solve(hs.targets).vertices,
         "volumetric ARAP": VolumetricDeformer(mesh, hs.indices).solve(hs.targets).vertices,
     }
-    basis = view_basis(np.concatenate(list(results.values())))
+    basis = view_frame(mesh.vertices)[0]  # upright, from the rest shape, as every figure
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.6))
     render_mesh(axes[0], mesh.vertices, mesh.faces, (np.isin(np.arange(mesh.n_vertices),
                 hs.indices)).astype(float), basis=basis, cmap="coolwarm", reduce="max",
