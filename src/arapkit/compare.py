@@ -48,14 +48,19 @@ class MethodRun:
     notes: list[str] = field(default_factory=list)
 
 
-def method_list(rings: int = 3, rings_map: np.ndarray | None = None
-                ) -> list[tuple[str, dict[str, Any]]]:
+def method_list(rings: int = 3, rings_map: np.ndarray | None = None,
+                volumetric: bool = False) -> list[tuple[str, dict[str, Any]]]:
     """The methods of a comparison as (label, Deformer keyword arguments).
+
+    ``volumetric`` adds volumetric ARAP (the course report's inner edges) at r = 1, and
+    with the rigidity map when one is given.
 
     Examples
     --------
     >>> [label for label, _ in method_list(4)]
     ['ARAP', 'SR-ARAP', 'embedded', 'r-ring r=4']
+    >>> [label for label, _ in method_list(4, volumetric=True)][-1]
+    'volumetric ARAP'
     """
     methods: list[tuple[str, dict[str, Any]]] = [
         ("ARAP", {"energy": "rring", "rings": 1}),
@@ -66,13 +71,17 @@ def method_list(rings: int = 3, rings_map: np.ndarray | None = None
         methods.append((f"r-ring r={rings}", {"energy": "rring", "rings": rings}))
     if rings_map is not None:
         methods.append(("r-ring mixed r", {"energy": "rring", "rings": rings_map}))
+    if volumetric:
+        methods.append(("volumetric ARAP", {"energy": "rring", "volumetric": True,
+                                            "rings": 1 if rings_map is None else rings_map}))
     return methods
 
 
 def run_comparison(mesh: Mesh, handles, targets, *, rings: int = 3,
                    rings_map: np.ndarray | None = None, weights: str = DEFAULT_WEIGHTS,
                    tol: float = 1e-3, max_iter: int = 1000, sr_alpha: float | None = None,
-                   nodes: int | None = None, progress=None) -> list[MethodRun]:
+                   nodes: int | None = None, volumetric: bool = False,
+                   progress=None) -> list[MethodRun]:
     """Run every method of :func:`method_list` with the same handles and targets.
 
     ``progress(label)``, if given, returns a context manager that yields a solve callback
@@ -91,7 +100,7 @@ def run_comparison(mesh: Mesh, handles, targets, *, rings: int = 3,
 
     targets = np.asarray(targets, dtype=np.float64)
     runs = []
-    for label, kw in method_list(rings, rings_map):
+    for label, kw in method_list(rings, rings_map, volumetric):
         kw = dict(kw)
         if kw["energy"] == "sr-arap" and sr_alpha is not None:
             kw["sr_alpha"] = sr_alpha
@@ -99,14 +108,16 @@ def run_comparison(mesh: Mesh, handles, targets, *, rings: int = 3,
             if nodes is not None:
                 kw["nodes"] = nodes
             kw["tol"] = min(tol, 1e-6)  # Gauss-Newton steps: a tighter test costs little
-        weights_kw = {} if kw["energy"] == "embedded" else {"weights": weights}
+        # embedded deformation has no edge weights; the volume's edges have their own
+        weights_kw = {} if kw["energy"] == "embedded" or kw.get("volumetric") else {
+            "weights": weights}
         t0 = time.perf_counter()
         d = Deformer(mesh, handles, max_iter=max_iter, **({"tol": tol} | kw), **weights_kw)
         with progress(label) if progress is not None else nullcontext() as cb:
             res = d.solve(targets, callback=cb)
         seconds = time.perf_counter() - t0
         run = MethodRun(label, kw["energy"],
-                        {k: v for k, v in kw.items() if k not in ("energy", "tol")},
+                        {k: v for k, v in kw.items() if k not in ("energy", "tol", "volumetric")},
                         res, seconds, notes=list(d.notes))
         run.folded = folded_edge_fraction(mesh, res.vertices)
         run.volume_change = volume_change(mesh, res.vertices)

@@ -65,6 +65,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    help="iteration cap per method (default 1000)")
     p.add_argument("-o", "--out", required=True, metavar="DIR",
                    help="output folder (created if missing)")
+    p.add_argument("--volumetric", action="store_true",
+                   help="also run volumetric ARAP (tetrahedra inside the closed surface; needs "
+                   "pip install 'arapkit[volume]')")
     p.add_argument("--dry-run", action="store_true",
                    help="no solve: print each handle group's vertex count and motion and draw "
                    "the groups on the rest shape (DIR/groups.png)")
@@ -111,6 +114,11 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     check_method("sr-arap", args.sr_alpha)
     check_method("embedded", None, args.nodes)
+    if args.volumetric:
+        from arapkit.volume import MESHER_HINT, have_mesher
+
+        if not have_mesher():
+            raise InputError(MESHER_HINT)
     out = _prepare_out(args.out, [args.mesh, args.handles, args.transform, args.rings_file])
     source = load_mesh_checked(args.mesh)
     mesh = maybe_weld(source, args.weld)
@@ -125,6 +133,10 @@ def run(args: argparse.Namespace) -> int:
         rings_map = None if rings_map is None else weld_values(mesh, rings_map)
     if args.dry_run:
         return _dry_run(args, mesh, hs, out)
+    if args.volumetric:
+        from arapkit.volume import check_closed
+
+        check_closed(mesh)  # refuse an open surface before any method runs
 
     def progress(label: str) -> Progress:
         return Progress(disable=args.quiet, desc=label)
@@ -132,6 +144,7 @@ def run(args: argparse.Namespace) -> int:
     runs = run_comparison(mesh, hs.indices, hs.targets, rings=args.rings, rings_map=rings_map,
                           weights=args.weights, tol=args.tol, max_iter=args.max_iter,
                           sr_alpha=args.sr_alpha, nodes=args.nodes,
+                          volumetric=args.volumetric,
                           progress=None if args.quiet else progress)
     for r in runs:
         for msg in r.notes:
