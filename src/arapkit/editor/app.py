@@ -56,7 +56,7 @@ TOOLS = ("Navigate", "Select: click", "Select: rectangle", "Paint brush", "Flood
 VIEWS = ("Shaded", "Rigidity r", "Energy")
 METHODS = {"r-ring ARAP": "arap", "Laplacian editing": "laplacian",
            "spokes-and-rims ARAP": "spokes-and-rims", "SR-ARAP": "sr-arap",
-           "embedded deformation": "embedded"}
+           "embedded deformation": "embedded", "volumetric ARAP": "volumetric"}
 UP_AXES = {"+z": (0, 0, 1), "+y": (0, 1, 0), "+x": (1, 0, 0),
            "-z": (0, 0, -1), "-y": (0, -1, 0), "-x": (-1, 0, 0)}
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")

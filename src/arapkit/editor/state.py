@@ -48,7 +48,7 @@ SESSION_FORMAT = "arapkit-editor-session"
 SESSION_VERSION = 1
 #: solver-panel methods: "arap" is r-ring ARAP with the painted map, the others name
 #: :data:`arapkit.energy.ENERGIES` (no rigidity map) or Laplacian editing
-METHODS = ("arap", "laplacian", "spokes-and-rims", "sr-arap", "embedded")
+METHODS = ("arap", "laplacian", "spokes-and-rims", "sr-arap", "embedded", "volumetric")
 MAX_UNDO = 200
 
 

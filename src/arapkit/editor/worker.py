@@ -101,14 +101,18 @@ class _Engine:
         from arapkit import Deformer
 
         s = req.settings
-        energy = "rring" if s.method == "arap" else s.method
+        # volumetric ARAP is r-ring ARAP on the tetrahedralised inside (tetrahedralised once
+        # per mesh: the deformer is kept while only handles and r change)
+        volumetric = s.method == "volumetric"
+        energy = "rring" if s.method in ("arap", "volumetric") else s.method
         # only r-ring ARAP has a rigidity map; the other methods ignore the painted one
         rings = req.rings if energy == "rring" else 1
-        key = (id(req.mesh), s.weights, energy)
+        key = (id(req.mesh), s.weights, s.method)
         if self.deformer is None or self._key != key:
             self.deformer = Deformer(
                 req.mesh, req.handles, rings=rings, energy=energy, weights=s.weights,
                 tol=s.tol, max_iter=s.max_iter,
+                **({"volumetric": True} if volumetric else {}),
             )
             self._key = key
             self.mesh = req.mesh
