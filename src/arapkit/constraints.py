@@ -139,7 +139,7 @@ def follow_rigidly(mesh: Mesh | EdgeGraph, free: np.ndarray, deformed: np.ndarra
     >>> m = Mesh(V, [[0, 1, 2], [3, 4, 5]])
     >>> P = V.copy(); P[:3] += [5, 0, 0]           # the handled triangle moved by +5 x
     >>> follow_rigidly(m, np.array([3, 4, 5]), P)
-    >>> np.round(P[3:] - V[3:], 9).tolist()
+    >>> (np.round(P[3:] - V[3:], 9) + 0.0).tolist()
     [[5.0, 0.0, 0.0], [5.0, 0.0, 0.0], [5.0, 0.0, 0.0]]
     """
     from scipy.spatial import cKDTree

@@ -12,7 +12,7 @@ Examples
 >>> from arapkit.shapes import bar
 >>> d = pathlib.Path(tempfile.mkdtemp())
 >>> m = bar()
->>> save_mesh(d / "bar.off", m.vertices, m.faces)
+>>> _ = save_mesh(d / "bar.off", m.vertices, m.faces)
 >>> _ = (d / "h.json").write_text(json.dumps([
 ...     {"box": {"min": [-1, -1, -1], "max": [0.01, 1, 1]}},
 ...     {"box": {"min": [6.99, -1, -1], "max": [8, 1, 1]}, "translate": [0, 1, 0]}]))

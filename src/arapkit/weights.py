@@ -76,7 +76,7 @@ def cotangent_weights(mesh: Mesh) -> np.ndarray:
     >>> from arapkit import Mesh
     >>> m = Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
     >>> np.round(cotangent_weights(m), 6).tolist()   # edges (0,1), (0,2), (1,2)
-    [0.0, 0.0, 0.5]
+    [0.5, 0.5, 0.0]
     """
     F = mesh.faces
     cots = _corner_cotangents(mesh.vertices, F)

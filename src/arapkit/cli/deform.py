@@ -375,7 +375,7 @@ def describe_groups(vertices: np.ndarray, hs) -> list[str]:
     >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
     >>> hs = parse_handles([{"name": "a", "indices": [0]},
     ...                     {"name": "b", "indices": [2], "translate": [0, 1, 0]}], V)
-    >>> print("\n".join(describe_groups(V, hs)))
+    >>> print(chr(10).join(describe_groups(V, hs)))
     a: 1 vertex, fixed
     b: 1 vertex, moved: mean displacement [0, 1, 0], largest 1
     """
