@@ -275,20 +275,31 @@ def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:
     return ext, gz
 
 
+def ply_property_column(name: str, values, n: int) -> np.ndarray:
+    """A vertex property as PLY can hold it: n values, int32 for integers, else double.
+
+    Examples
+    --------
+    >>> ply_property_column("rings", [1, 2], 2).dtype.name
+    'int32'
+    """
+    arr = np.asarray(values)
+    if arr.shape != (n,):
+        raise ValueError(f"vertex property {name!r} has shape {arr.shape}, expected ({n},)")
+    if not name.isidentifier():
+        raise ValueError(f"vertex property name {name!r} is not a plain identifier")
+    # PLY has no 64-bit integers: integers as int32, everything else as double
+    return arr.astype(np.int32 if arr.dtype.kind in "iub" else np.float64)
+
+
 def _ply_bytes(vertices: np.ndarray, faces: np.ndarray, props: Mapping[str, np.ndarray]) -> bytes:
     n, m = len(vertices), len(faces)
     fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
     columns: list[np.ndarray] = [vertices[:, 0], vertices[:, 1], vertices[:, 2]]
     for name, values in props.items():
-        arr = np.asarray(values)
-        if arr.shape != (n,):
-            raise ValueError(f"vertex property {name!r} has shape {arr.shape}, expected ({n},)")
-        if not name.isidentifier():
-            raise ValueError(f"vertex property name {name!r} is not a plain identifier")
-        # PLY has no 64-bit integers: store integers as int32, everything else as double
-        dt = np.dtype(np.int32) if arr.dtype.kind in "iub" else np.dtype(np.float64)
-        fields.append((name, dt.newbyteorder("<").str))
-        columns.append(arr.astype(dt))
+        col = ply_property_column(name, values, n)
+        fields.append((name, col.dtype.newbyteorder("<").str))
+        columns.append(col)
     vert = np.empty(n, dtype=fields)
     for (name, _), col in zip(fields, columns, strict=True):
         vert[name] = col

@@ -25,6 +25,7 @@ from collections.abc import Callable, Mapping
 import numpy as np
 
 from .attributes import MeshAttributes, recompute_normals
+from .fileio import ply_property_column
 
 __all__ = ["write_with_attributes"]
 
@@ -156,13 +157,7 @@ def _ply(V: np.ndarray, attrs: MeshAttributes, props: Mapping[str, np.ndarray]) 
             q = np.clip(np.round(rgb * 255.0), 0, 255).astype(np.uint8)
             cols.update({c: q[:, i] for i, c in enumerate(names)})
     for name, values in props.items():
-        arr = np.asarray(values)
-        if arr.shape != (n,):
-            raise ValueError(f"vertex property {name!r} has shape {arr.shape}, expected ({n},)")
-        if not name.isidentifier():
-            raise ValueError(f"vertex property name {name!r} is not a plain identifier")
-        # PLY has no 64-bit integers: integers as int32, everything else as double
-        cols[name] = arr.astype(np.int32 if arr.dtype.kind in "iub" else np.float64)
+        cols[name] = ply_property_column(name, values, n)
     vdt = [(k, np.dtype(v.dtype).newbyteorder("<").str) for k, v in cols.items()]
     vert = np.empty(n, dtype=vdt)
     for k, v in cols.items():
