@@ -247,7 +247,8 @@ def _comparison(out: Path, mesh, handles, targets, soft_hard, plots,
     """ARAP, SR-ARAP, embedded deformation, r = 4 and the two-material map on one bend."""
     from arapkit.compare import comparison_figure, comparison_rows, run_comparison, write_csv
 
-    runs = run_comparison(mesh, handles, targets, rings=4, rings_map=soft_hard)
+    runs = run_comparison(mesh, handles, targets, rings=4, rings_map=soft_hard,
+                          weights=PAPER_WEIGHTS)
     rows = comparison_rows(runs)
     write_csv(out / "compare.csv", rows)
     fixed = np.all(targets == mesh.vertices[handles], axis=1)
