@@ -162,7 +162,7 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
     InputError
         Any bad input, with a one-line message naming the file.
     """
-    from .cli.common import load_mesh_checked
+    from .mesh import load_mesh
 
     if job.energy not in ENERGIES:
         raise InputError(f"energy {job.energy} is not available in this build "
@@ -175,7 +175,7 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
             # Advice keeps its interface wording through the prefix
             note(msg.after(f"{job.mesh}: ") if isinstance(msg, Advice) else f"{job.mesh}: {msg}")
 
-    source = load_mesh_checked(job.mesh)
+    source = load_mesh(job.mesh)
     if job.weld is None:
         mesh = source
     else:
@@ -294,7 +294,7 @@ def job_report(
 ) -> dict[str, Any]:
     """The JSON report of a solved job: inputs, parameters, handles, result, timings."""
     from .cli import _version
-    from .cli.common import rings_summary
+    from .rings import rings_summary
 
     mesh, hs = prepared.mesh, prepared.handles
     r = prepared.rings

@@ -830,7 +830,8 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     Raises
     ------
     InputError
-        The file is missing, unreadable, truncated or invalid.
+        The file is missing, unreadable, truncated or invalid (never another exception
+        for a bad file).
 
     Examples
     --------
@@ -840,6 +841,17 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     """
     path = os.fspath(path)
     data, ext = _read_bytes(path)
+    try:
+        return _parse_mesh(data, ext, path)
+    except InputError:
+        raise
+    except (ValueError, IndexError, KeyError, EOFError, UnicodeDecodeError, OverflowError) as e:
+        # a parser tripping over a malformed file means the file is bad, not arapkit
+        raise InputError(f"{path}: cannot read mesh ({type(e).__name__}: {e})") from None
+
+
+def _parse_mesh(data: bytes, ext: str, path: str) -> Mesh:
+    """The mesh in ``data`` (the bytes of ``path``, format ``ext``)."""
     name = os.path.basename(path)
     if ext in ("off", "obj"):
         text = data.decode("utf-8", "replace")

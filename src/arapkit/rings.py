@@ -33,6 +33,7 @@ __all__ = [
     "build_neighbourhoods",
     "check_rings",
     "neighbourhoods_from_arrays",
+    "rings_summary",
     "vertex_adjacency",
 ]
 
@@ -304,3 +305,19 @@ def neighbourhoods_from_arrays(
     count = np.bincount(edge_idx, minlength=len(E))
     return Neighbourhoods(r, eptr, edge_idx, edge_layer, vptr, disk_idx, disk_coef,
                           tptr, tk, tc, count)
+
+
+def rings_summary(rings: np.ndarray) -> dict[str, object]:
+    """Compact description of a rigidity map for reports.
+
+    Examples
+    --------
+    >>> rings_summary(np.array([2, 2, 6]))
+    {'min': 2, 'max': 6, 'counts': {'2': 2, '6': 1}}
+    """
+    values, counts = np.unique(np.asarray(rings), return_counts=True)
+    return {
+        "min": int(values.min()),
+        "max": int(values.max()),
+        "counts": {str(int(v)): int(c) for v, c in zip(values, counts, strict=True)},
+    }

@@ -9,10 +9,9 @@ import time
 from collections.abc import Callable
 from typing import Any
 
-import numpy as np
-
 from arapkit import validate
 from arapkit.errors import InputError
+from arapkit.rings import rings_summary  # noqa: F401 - re-exported for the commands
 
 __all__ = [
     "Progress",
@@ -103,20 +102,11 @@ def add_view_options(parser: argparse.ArgumentParser) -> None:
 
 
 def load_mesh_checked(path: str):
-    """:func:`arapkit.load_mesh`, turning any parse failure into an :class:`InputError`.
-
-    A loader that trips over a malformed file (IndexError, ValueError ...) means the file
-    is bad, not that arapkit is broken, so the user gets exit status 2 and a one-liner.
-    """
+    """:func:`arapkit.load_mesh` (kept for callers of this name: it now refuses every bad
+    file with an :class:`InputError` itself)."""
     from arapkit import load_mesh
 
-    try:
-        return load_mesh(path)
-    except InputError:
-        raise
-    except (ValueError, IndexError, KeyError, EOFError, UnicodeDecodeError, OSError,
-            OverflowError) as e:
-        raise InputError(f"{path}: cannot read mesh ({type(e).__name__}: {e})") from None
+    return load_mesh(path)
 
 
 def weld_tolerance(text: str) -> float:
@@ -250,21 +240,6 @@ def _is_terminal(stream: Any) -> bool:
     except (AttributeError, ValueError):  # replaced or closed streams
         return False
 
-
-def rings_summary(rings: np.ndarray) -> dict[str, Any]:
-    """Compact description of a rigidity map for reports.
-
-    Examples
-    --------
-    >>> rings_summary(np.array([2, 2, 6]))
-    {'min': 2, 'max': 6, 'counts': {'2': 2, '6': 1}}
-    """
-    values, counts = np.unique(np.asarray(rings), return_counts=True)
-    return {
-        "min": int(values.min()),
-        "max": int(values.max()),
-        "counts": {str(int(v)): int(c) for v, c in zip(values, counts, strict=True)},
-    }
 
 
 def add_example_epilog(examples: list[str]) -> dict[str, Callable | str]:
