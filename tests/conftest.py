@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import shutil
+import subprocess
 from collections import deque
 from pathlib import Path
 
@@ -50,3 +52,21 @@ def independent_ring_edges(mesh: Mesh, k: int, r: int) -> set[tuple[int, int]]:
         (i, j) for i, j in mesh.edges.tolist()
         if min(dist.get(i, 1 << 30), dist.get(j, 1 << 30)) <= r - 1
     }
+
+
+def _make_unwritable(folder: Path) -> None:
+    """Make ``folder`` refuse new files, even to root; skip when this system cannot."""
+    if shutil.which("chattr") is None:
+        pytest.skip("chattr not available to make a folder immutable")
+    proc = subprocess.run(["chattr", "+i", str(folder)], capture_output=True, text=True)
+    if proc.returncode != 0:
+        pytest.skip(f"chattr +i failed here ({proc.stderr.strip()}): needs root on ext4/xfs")
+
+
+@pytest.fixture
+def locked(tmp_path):
+    folder = tmp_path / "locked"
+    folder.mkdir()
+    _make_unwritable(folder)
+    yield folder
+    subprocess.run(["chattr", "-i", str(folder)], check=False)

@@ -536,3 +536,19 @@ def test_dry_run_counts_groups_without_dask_or_output(data, capsys, monkeypatch)
     assert f"{fixed + moved} handle vertices" in text
     assert "job 3 -> broken.ply: failed: " in text and "truncated" in text
     assert not out.exists()
+
+
+@needs_dask
+def test_unwritable_output_folder_is_refused_before_any_job(data, locked, capsys, monkeypatch):
+    """An output folder that cannot take files is found before a cluster starts or a job
+    runs, and the message names the user's path (issue: outputs checked first)."""
+    from arapkit import batch
+
+    folder, _, _ = data
+    monkeypatch.setattr(batch, "_local_cluster",
+                        lambda *a, **k: pytest.fail("a cluster was started"))
+    assert main(["batch", str(folder / "jobs.jsonl"), "-o", str(locked), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and f"{locked / 'summary.csv'}: cannot write" in err[0]
+    assert main(["batch", str(folder / "jobs.jsonl"), "-o", str(locked / "sub"), "-q"]) == 2
+    assert f"{locked / 'sub'}: cannot create the output folder" in capsys.readouterr().err

@@ -11,8 +11,6 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import shutil
-import subprocess
 from pathlib import Path
 
 import numpy as np
@@ -271,24 +269,6 @@ def test_output_in_proc_names_the_output(capsys, files):
     line = cli_refuses(capsys, tmp, "deform", tmp / "bar.off", "--handles", tmp / "h.json",
                        "-o", "/proc/o.ply")
     assert "/proc/o.ply: cannot write the output" in line and ".tmp" not in line
-
-
-def _make_unwritable(folder: Path) -> None:
-    """Make ``folder`` refuse new files, even to root; skip when this system cannot."""
-    if shutil.which("chattr") is None:
-        pytest.skip("chattr not available to make a folder immutable")
-    proc = subprocess.run(["chattr", "+i", str(folder)], capture_output=True, text=True)
-    if proc.returncode != 0:
-        pytest.skip(f"chattr +i failed here ({proc.stderr.strip()}): needs root on ext4/xfs")
-
-
-@pytest.fixture
-def locked(tmp_path):
-    folder = tmp_path / "locked"
-    folder.mkdir()
-    _make_unwritable(folder)
-    yield folder
-    subprocess.run(["chattr", "-i", str(folder)], check=False)
 
 
 @pytest.mark.parametrize("which", ["-o", "--report", "--figure"])

@@ -247,6 +247,20 @@ def dry_run(path: str | os.PathLike) -> list[str]:
     return lines
 
 
+def _check_outdir(outdir: Path) -> None:
+    """Create OUTDIR and prove it writable before any cluster starts or job runs."""
+    from .fileio import check_output_path
+
+    if outdir.exists() and not outdir.is_dir():
+        raise InputError(f"{outdir}: output folder is a file")
+    try:
+        outdir.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise InputError(f"{outdir}: cannot create the output folder "
+                         f"({e.strerror or type(e).__name__})") from None
+    check_output_path(outdir / "summary.csv", what="batch output")
+
+
 def load_jobs(path: str | os.PathLike) -> list[dict]:
     """Read and check a JSON Lines job file (blank lines are ignored).
 
@@ -594,8 +608,7 @@ def run(
         if len(set(outs)) != len(outs):
             raise InputError("jobs: two jobs write the same output")
     outdir = Path(outdir)
-    if outdir.exists() and not outdir.is_dir():
-        raise InputError(f"{outdir}: output folder is a file")
+    _check_outdir(outdir)
     from distributed import as_completed
 
     own = client is None
