@@ -19,8 +19,6 @@ from arapkit.cli.common import (
     add_example_epilog,
     add_view_options,
     add_weld_option,
-    load_mesh_checked,
-    maybe_weld,
     note,
     positive_float,
     positive_int,
@@ -107,7 +105,7 @@ def run(args: argparse.Namespace) -> int:
         write_csv,
     )
     from arapkit.fileio import save_mesh
-    from arapkit.handles import load_handles, load_rings
+    from arapkit.jobs import DeformJob, load_job_inputs
     from arapkit.plots import save_figure
     from arapkit.solver import check_method
 
@@ -120,17 +118,13 @@ def run(args: argparse.Namespace) -> int:
         if not have_mesher():
             raise InputError(MESHER_HINT)
     out = _prepare_out(args.out, [args.mesh, args.handles, args.transform, args.rings_file])
-    source = load_mesh_checked(args.mesh)
-    mesh = maybe_weld(source, args.weld)
-    for msg in mesh.notes if mesh is source else source.notes + mesh.notes:
-        note(f"{args.mesh}: {msg}", args.quiet)
-    hs = load_handles(args.handles, source.vertices, args.transform)
-    rings_map = load_rings(args.rings_file, source.n_vertices) if args.rings_file else None
-    if mesh is not source:
-        from arapkit.welding import weld_handle_set, weld_values
-
-        hs = weld_handle_set(mesh, hs)
-        rings_map = None if rings_map is None else weld_values(mesh, rings_map)
+    # the same reading as deform and batch: mesh, optional weld, handles and r mapped onto it
+    inputs = load_job_inputs(
+        DeformJob(mesh=args.mesh, handles=args.handles, transform=args.transform,
+                  rings_file=args.rings_file, weld=args.weld),
+        note=lambda msg: note(msg, args.quiet))
+    mesh, hs = inputs.mesh, inputs.handles
+    rings_map = inputs.rings if args.rings_file else None
     if args.dry_run:
         return _dry_run(args, mesh, hs, out)
     if args.volumetric:
