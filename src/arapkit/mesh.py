@@ -124,7 +124,40 @@ def _fan_triangulate(polygons: list[list[int]]) -> tuple[np.ndarray, int]:
     return np.asarray(tris, dtype=np.int64).reshape(-1, 3), split
 
 
-class Mesh:
+class EdgeTopology:
+    """Vertex adjacency and connected components of anything with ``n_vertices`` and
+    ``edges`` (a :class:`Mesh`, or the solver's :class:`arapkit.problem.EdgeGraph`).
+
+    Examples
+    --------
+    >>> Mesh(np.eye(3), [[0, 1, 2]]).n_components
+    1
+    """
+
+    @cached_property
+    def adjacency(self) -> sp.csr_matrix:
+        """Symmetric vertex adjacency matrix (CSR, ones on edges)."""
+        E = self.edges
+        n = self.n_vertices
+        A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+        return (A + A.T).tocsr()
+
+    @cached_property
+    def _components(self) -> tuple[int, np.ndarray]:
+        return connected_components(self.adjacency, directed=False)
+
+    @property
+    def n_components(self) -> int:
+        """Number of connected components (an isolated vertex is its own)."""
+        return int(self._components[0])
+
+    @property
+    def component_labels(self) -> np.ndarray:
+        """Connected-component label of each vertex."""
+        return self._components[1]
+
+
+class Mesh(EdgeTopology):
     """A validated triangle mesh.
 
     Parameters
@@ -344,28 +377,6 @@ class Mesh:
         """Number of faces on each edge of :attr:`edges` (1 = boundary, >2 = non-manifold)."""
         ukeys, inverse = self._edge_keys
         return np.bincount(inverse, minlength=len(ukeys))
-
-    @cached_property
-    def adjacency(self) -> sp.csr_matrix:
-        """Symmetric vertex adjacency matrix (CSR, ones on edges)."""
-        E = self.edges
-        n = self.n_vertices
-        A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
-        return (A + A.T).tocsr()
-
-    @cached_property
-    def _components(self) -> tuple[int, np.ndarray]:
-        return connected_components(self.adjacency, directed=False)
-
-    @property
-    def n_components(self) -> int:
-        """Number of connected components (an unreferenced vertex is its own)."""
-        return int(self._components[0])
-
-    @property
-    def component_labels(self) -> np.ndarray:
-        """Connected-component label of each vertex."""
-        return self._components[1]
 
     @cached_property
     def unreferenced(self) -> np.ndarray:

@@ -26,10 +26,10 @@ from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
-import scipy.sparse as sp
 
 from .constraints import Elimination, anchor_components, check_handles
 from .errors import Advice, InputError
+from .mesh import EdgeTopology
 from .weights import SOUND_WEIGHTS
 
 if TYPE_CHECKING:
@@ -40,7 +40,7 @@ __all__ = ["ARAPProblem", "EdgeGraph", "bandwidth_order", "unit_scale"]
 
 
 @dataclass(frozen=True, eq=False)
-class EdgeGraph:
+class EdgeGraph(EdgeTopology):
     """Rest positions and an undirected edge list (optionally with the triangles they bound).
 
     Parameters
@@ -81,29 +81,6 @@ class EdgeGraph:
     def n_vertices(self) -> int:
         """Number of vertices."""
         return len(self.vertices)
-
-    @cached_property
-    def _components(self) -> tuple[int, np.ndarray]:
-        from scipy.sparse.csgraph import connected_components
-
-        return connected_components(self.adjacency, directed=False)
-
-    @property
-    def n_components(self) -> int:
-        """Number of connected components (an isolated vertex is its own)."""
-        return int(self._components[0])
-
-    @property
-    def component_labels(self) -> np.ndarray:
-        """Connected-component label of each vertex."""
-        return self._components[1]
-
-    @cached_property
-    def adjacency(self) -> sp.csr_matrix:
-        """Symmetric vertex adjacency (CSR, ones on edges)."""
-        n, E = self.n_vertices, self.edges
-        A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
-        return (A + A.T).tocsr()
 
     def scaled(self, factor: float) -> EdgeGraph:
         """The same graph with every position multiplied by ``factor`` (components kept)."""
