@@ -43,7 +43,8 @@ README = ROOT / "README.md"
 SHARED = ROOT.parent / "shared"
 NEEDS_DATA = "# needs ../shared/data"
 #: optional extras: a block or line with the marker skips when the module is missing
-NEEDS_EXTRA = {"# needs arapkit[torch]": "torch"}
+NEEDS_EXTRA = {"# needs arapkit[torch]": ("torch", "torch"),
+               "# needs arapkit[volume]": ("pytetwild", "volume")}
 NOT_RUN = "# not run"
 _FENCE = re.compile(r"^(\s*)```(\S*)\s*$")
 _SAME_AS = re.compile(r"<!--\s*same-as:\s*(\S+)\s*-->")
@@ -115,9 +116,9 @@ def scratch(tmp_path_factory):
 def _skip_reason(code: str) -> str | None:
     if NEEDS_DATA in code and not _has_data():
         return "needs ../shared/data, which is absent"
-    for marker, module in NEEDS_EXTRA.items():
+    for marker, (module, extra) in NEEDS_EXTRA.items():
         if marker in code and importlib.util.find_spec(module) is None:
-            return f"needs {module} (pip install 'arapkit[{module}]'), which is not installed"
+            return f"needs {module} (pip install 'arapkit[{extra}]'), which is not installed"
     if NOT_RUN in code:
         return "marked '# not run'"
     if "|" in code:

@@ -179,8 +179,9 @@ class Deformer:
         returns a :class:`arapkit.volume.VolumetricDeformer` (same interface; needs
         ``pip install 'arapkit[volume]'``). The surface ``weights`` do not apply.
     density : float, optional
-        With ``volumetric=True``: interior edge length in multiples of the surface's mean
-        edge length (default :data:`arapkit.volume.DEFAULT_DENSITY`).
+        With ``volumetric=True``: spacing of the interior points in multiples of the
+        surface's mean edge length, or of 1/40 of the bounding-box diagonal where that is
+        larger (default :data:`arapkit.volume.DEFAULT_DENSITY`).
 
     Examples
     --------

@@ -55,7 +55,10 @@ __all__ = [
     "VolumetricDeformer",
     "check_closed",
     "have_mesher",
+    "interior_lattice",
+    "lattice_spacing",
     "mesh_volume",
+    "morton_codes",
     "save_volume",
     "tet_cotangent_weights",
     "tet_volume_weights",
@@ -63,8 +66,8 @@ __all__ = [
     "volume_graph",
 ]
 
-#: interior tet edge length, in multiples of the surface's mean edge length (measured:
-#: docs/benchmarks.md, "Volumetric")
+#: spacing of the interior lattice, in multiples of the surface's mean edge length (or of
+#: 1/40 of the bounding-box diagonal where that is larger; see lattice_spacing)
 DEFAULT_DENSITY = 1.0
 #: weights below this fraction of the mean absolute weight are raised to it
 CLAMP_FRACTION = 1e-3
@@ -83,6 +86,13 @@ _TET_EDGES = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
 VOLUME_FORMATS = {".vtu": "vtu", ".msh": "gmsh", ".vtk": "vtk", ".mesh": "medit"}
 #: the mesher's target edge length is at least this many envelopes (see tetrahedralise)
 MIN_EDGE_OVER_ENVELOPE = 4.0
+#: at density 1 the interior lattice is never finer than the bounding-box diagonal over
+#: this (20 kept less volume on the hand and elephant, 60 cost 3-5x per iteration for the
+#: same results; docs/benchmarks.md, "Volumetric")
+MAX_LATTICE_CELLS = 40
+#: lattice points are kept this many spacings away from the surface (closer ones would make
+#: flat tets against it)
+LATTICE_CLEARANCE = 0.5
 MESHER_HINT = (
     "volumetric ARAP needs the optional tetrahedral mesher: pip install 'arapkit[volume]' "
     "(installs pytetwild)"
@@ -256,7 +266,8 @@ def tetrahedralise(mesh: Mesh, density: float = DEFAULT_DENSITY, threads: int = 
     mesh : Mesh
         Closed (watertight) surface.
     density : float
-        Target interior edge length in multiples of the surface's mean edge length.
+        Spacing of the interior lattice in multiples of the surface's mean edge length, or
+        of 1/40 of the bounding-box diagonal where that is larger (:func:`lattice_spacing`).
     threads : int
         Mesher threads (0 = all cores).
 
@@ -283,19 +294,124 @@ def tetrahedralise(mesh: Mesh, density: float = DEFAULT_DENSITY, threads: int = 
     used = np.unique(mesh.faces)  # unreferenced vertices are no part of the volume
     remap = np.full(mesh.n_vertices, -1, dtype=np.int64)
     remap[used] = np.arange(len(used))
+    diag = mesh.bounding_box_diagonal
+    spacing = lattice_spacing(mean_edge, diag, density)
+    seeds = interior_lattice(mesh, spacing)
     # fTetWild crashed (segmentation fault) when its target edge length came within about
     # 3x of its envelope (the thin default bar at density < 2): finer targets are raised to
-    # 4x; a smaller envelope instead made bunny00 2-3x slower to mesh
-    ela = max(density * mean_edge, MIN_EDGE_OVER_ENVELOPE * ENVELOPE * mesh.bounding_box_diagonal)
-    TV, TT = _run_ftetwild(mesh.name, V[used], remap[mesh.faces], ela, ENVELOPE, threads)
+    # 4x; a smaller envelope instead made bunny00 2-3x slower to mesh. The interior points
+    # come from the lattice, not from this target
+    ela = max(spacing, MIN_EDGE_OVER_ENVELOPE * ENVELOPE * diag)
+    faces = remap[mesh.faces]
+    # fTetWild's surface tree (an AABB tree over the faces in the order given) is only as
+    # good as that order: bunny00's own face order made one of its passes take 25 s of the
+    # 28; in Morton order the whole mesher takes 2.5 s, with the same tets
+    faces = faces[np.argsort(morton_codes(V[mesh.faces].mean(axis=1)), kind="stable")]
+    TV, TT = _run_ftetwild(mesh.name, np.concatenate([V[used], seeds]), faces, ela,
+                           ENVELOPE, threads)
     seconds = time.perf_counter() - t0
     TV = np.asarray(TV, dtype=np.float64)
     TT = np.asarray(TT, dtype=np.int64)
     if len(TT) == 0:
         raise InputError(f"{mesh.name}: the tetrahedral mesher found no inside to fill")
+    # lattice points outside the surface are in no tet: drop them
+    kept = np.unique(TT)
+    if len(kept) < len(TV):
+        renum = np.full(len(TV), -1, dtype=np.int64)
+        renum[kept] = np.arange(len(kept))
+        TV, TT = TV[kept], renum[TT]
     tm = _renumber(mesh, used, TV, TT, seconds)
     tm.cpu_seconds = getattr(_run_ftetwild, "cpu_seconds", 0.0)
     return tm
+
+
+def morton_codes(points: np.ndarray, bits: int = 10) -> np.ndarray:
+    """Z-order (Morton) code of every point on a ``2**bits`` grid over their bounding box.
+
+    Sorting by it puts points that are close in space close in the order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> morton_codes(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 1.0]]), bits=1).tolist()
+    [0, 1, 2, 7]
+    """
+    P = np.asarray(points, dtype=np.float64)
+    lo, span = P.min(axis=0), np.ptp(P, axis=0)
+    q = (np.divide(P - lo, span, out=np.zeros_like(P), where=span > 0)
+         * (2**bits - 1)).round().astype(np.uint64)
+    code = np.zeros(len(P), dtype=np.uint64)
+    for b in range(bits):
+        for k in range(3):
+            code |= ((q[:, k] >> np.uint64(b)) & np.uint64(1)) << np.uint64(3 * b + k)
+    return code
+
+
+def lattice_spacing(mean_edge: float, diagonal: float, density: float) -> float:
+    """Spacing of the interior lattice: ``density`` x max(mean edge, diagonal / 40).
+
+    The diagonal bound keeps the volume's size in check on finely tessellated surfaces
+    (bunny00's mean edge is 1/200 of its diagonal); ``density`` scales the spacing in both
+    regimes, so it is always a working knob (0.5: about 8x the interior points).
+
+    Examples
+    --------
+    >>> lattice_spacing(0.1, 1.0, 1.0), lattice_spacing(0.001, 1.0, 1.0)
+    (0.1, 0.025)
+    >>> lattice_spacing(0.001, 1.0, 0.5)
+    0.0125
+    """
+    return density * max(mean_edge, diagonal / MAX_LATTICE_CELLS)
+
+
+def interior_lattice(mesh: Mesh, spacing: float, seed: int = 0) -> np.ndarray:
+    """Seed points for the inside: a jittered cubic lattice, away from the surface.
+
+    fTetWild keeps every input point in its Delaunay mesh, and without its optimisation adds
+    almost none of its own, so these points *are* the interior (the report's "inner edges"
+    then run between them and the surface instead of straight across the inside). Points
+    closer than ``LATTICE_CLEARANCE * spacing`` to the surface (to within about 5 %: the
+    surface is sampled at a quarter of that) are left out; points outside
+    the surface are left in and end in no tet (the mesher's inside test, a winding number,
+    is better than any we would add). The jitter (±5 % of the spacing, fixed seed) breaks
+    the co-planarities between a lattice and a grid-like surface (the bars) that crashed
+    fTetWild.
+
+    Examples
+    --------
+    >>> from arapkit.shapes import bar
+    >>> P = interior_lattice(bar(1.0, 1.0, 1.0, (4, 4, 4)), 0.25)  # the unit cube
+    >>> len(P), bool((abs(P - [0.5, 0, 0]) < 0.3).all())         # 3 x 3 x 3 inside
+    (27, True)
+    """
+    from scipy.spatial import cKDTree
+
+    V = mesh.vertices
+    lo, hi = V.min(axis=0), V.max(axis=0)
+    axes = [np.arange(a + ((b - a) % spacing) / 2, b, spacing) for a, b in zip(lo, hi)]
+    G = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    G += np.random.default_rng(seed).uniform(-0.05 * spacing, 0.05 * spacing, G.shape)
+    clearance = LATTICE_CLEARANCE * spacing
+    dist, _ = cKDTree(_surface_samples(mesh, clearance / 2)).query(
+        G, distance_upper_bound=clearance)
+    return G[np.isinf(dist)]
+
+
+def _surface_samples(mesh: Mesh, step: float) -> np.ndarray:
+    """Points on every face, no farther than about ``step`` from any point of the surface."""
+    V, F = mesh.vertices, mesh.faces
+    P = V[F]  # (m, 3, 3)
+    longest = np.linalg.norm(P - np.roll(P, 1, axis=1), axis=2).max(axis=1)
+    k = np.maximum(1, np.ceil(longest / step)).astype(np.int64)
+    out = [V]
+    for kk in np.unique(k):
+        i, j = np.mgrid[0:kk + 1, 0:kk + 1]
+        keep = i + j <= kk
+        a, b = i[keep] / kk, j[keep] / kk  # barycentric grid of the triangle
+        T = P[k == kk]
+        out.append((T[:, None, 0] * (1 - a - b)[:, None] + T[:, None, 1] * a[:, None]
+                    + T[:, None, 2] * b[:, None]).reshape(-1, 3))
+    return np.concatenate(out)
 
 
 def _renumber(mesh: Mesh, used: np.ndarray, TV: np.ndarray, TT: np.ndarray,
@@ -526,7 +642,7 @@ class VolumetricDeformer:
     rings : int or (n,) int
         r per surface vertex; interior vertices take their nearest surface vertex's.
     density : float
-        Interior edge length in multiples of the surface's mean edge length.
+        Interior lattice spacing (see :func:`tetrahedralise`).
     tet : TetMesh, optional
         A tetrahedralisation of ``mesh`` to reuse (from :func:`tetrahedralise`).
     **options

@@ -192,8 +192,9 @@ def _add_volume_options(p: argparse.ArgumentParser) -> None:
         type=positive_float,
         default=None,
         metavar="X",
-        help="interior tet edge length in multiples of the surface's mean edge length "
-        "(default: arapkit.volume.DEFAULT_DENSITY)",
+        help="spacing of the interior points in multiples of the surface's mean edge length, "
+        "or of 1/40 of the bounding-box diagonal where that is larger (default 1; 0.5 gives "
+        "about 8x the points)",
     )
     g.add_argument(
         "--save-volume",
