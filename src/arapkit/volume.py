@@ -87,7 +87,7 @@ VOLUME_FORMATS = {".vtu": "vtu", ".msh": "gmsh", ".vtk": "vtk", ".mesh": "medit"
 #: the mesher's target edge length is at least this many envelopes (see tetrahedralise)
 MIN_EDGE_OVER_ENVELOPE = 4.0
 #: at density 1 the interior lattice is never finer than the bounding-box diagonal over
-#: this (20 kept less volume on the hand and elephant, 60 cost 3-5x per iteration for the
+#: this (20 kept less volume on the hand and elephant, 60 cost up to 3.5x per iteration for the
 #: same results; docs/benchmarks.md, "Volumetric")
 MAX_LATTICE_CELLS = 40
 #: lattice points are kept this many spacings away from the surface (closer ones would make
