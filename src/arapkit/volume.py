@@ -7,20 +7,20 @@ solver runs on the volume.
 
 Construction (see ``docs/volumetric.md``)
 -----------------------------------------
-1. :func:`tetrahedralise` fills the surface with fTetWild (``pytetwild``, MPL-2.0) *without*
-   surface simplification or optimisation, so every input vertex is a vertex of the tet mesh
-   at exactly its input position (checked: a vertex fTetWild did not keep is refused, never
+1. :func:`tetrahedralise` seeds the inside with a jittered lattice (:func:`interior_lattice`)
+   and fills the surface with fTetWild (``pytetwild``, MPL-2.0) *without* surface
+   simplification or optimisation, so every input vertex is a vertex of the tet mesh at
+   exactly its input position (checked: a vertex fTetWild did not keep is refused, never
    approximated). Tet vertices are renumbered so that the first ``n`` are the surface's
    vertices in their input order.
 2. The ARAP edge graph is the tet edges plus the input surface edges (fTetWild may split a
    surface edge where it cuts; the original edge is kept too). It is passed to the solver as
    a :class:`~arapkit.mesh.Mesh` whose faces are all four faces of every tet plus the input
    triangles; that mesh has exactly this edge set.
-3. Weights: the tetrahedral cotangent weights (linear FEM stiffness),
-   ``w_ij = (1/6) sum_t l_kl cot theta_kl``, clamped below at ``CLAMP_FRACTION`` times their
-   mean absolute value so that every weight is positive (the rest shape is then an exact
-   minimum and the system is positive definite). Surface edges that are no tet edge get the
-   median tet weight.
+3. Weights (:func:`volume_graph`): by default ``w_ij = sum_t vol_t / l_ij^2`` over the tets
+   on the edge, a stiffness per unit volume; ``uniform`` and clamped tetrahedral cotangent
+   weights are the alternatives. All are positive, so the rest shape is an exact minimum and
+   the system is positive definite.
 4. Per-vertex rigidity r given on the surface extends inwards: each interior vertex takes the
    r of its nearest surface vertex (rest positions).
 
@@ -71,21 +71,26 @@ __all__ = [
 DEFAULT_DENSITY = 1.0
 #: weights below this fraction of the mean absolute weight are raised to it
 CLAMP_FRACTION = 1e-3
-#: fTetWild's envelope, relative to the bounding-box diagonal. The surface is inserted
-#: without simplification and every input vertex is kept exactly whatever the envelope; on
-#: bunny00 fTetWild's default 1e-3 took 52 s, 1e-2 29-144 s and 3e-2 43 s on this shared
-#: 2-core machine, with the same benchmark results (docs/benchmarks.md)
-ENVELOPE = 3e-2
+#: fTetWild's envelope, relative to the bounding-box diagonal (fTetWild's own default). The
+#: surface is inserted without simplification and every input vertex is kept exactly whatever
+#: the envelope, but where fTetWild cannot insert a triangle exactly it accepts one within the
+#: envelope: at 3e-2 the hand's tets held 0.24 % more volume than its surface, at 1e-3
+#: 0.006 %, in the same time
+ENVELOPE = 1e-3
 #: positive weightings of the volume's edge graph (see :func:`volume_graph`)
 VOLUME_WEIGHTS = ("uniform", "tet-volume", "tet-cotan-clamped")
-#: measured best on the bends and twists of docs/benchmarks.md ("Volumetric"): fTetWild's
-#: unoptimised tets include slivers, whose cotangent weights are huge or negative
-DEFAULT_VOLUME_WEIGHTS = "uniform"
+#: a stiffness per unit volume, so the sparse interior counts as much as the densely
+#: tessellated skin (uniform weights make the skin the stiffer, the finer it is); it kept
+#: more volume than uniform on the twists and strained bends of docs/benchmarks.md
+#: ("Volumetric"), in fewer iterations. Cotangent weights suffer from unoptimised slivers
+DEFAULT_VOLUME_WEIGHTS = "tet-volume"
 _TET_EDGES = ((0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3))
 #: file formats of :func:`save_volume` (meshio's names)
 VOLUME_FORMATS = {".vtu": "vtu", ".msh": "gmsh", ".vtk": "vtk", ".mesh": "medit"}
 #: the mesher's target edge length is at least this many envelopes (see tetrahedralise)
 MIN_EDGE_OVER_ENVELOPE = 4.0
+#: and at least this fraction of the bounding-box diagonal (see tetrahedralise)
+COARSE_TARGET = 0.12
 #: at density 1 the interior lattice is never finer than the bounding-box diagonal over
 #: this (20 kept less volume on the hand and elephant, 60 cost up to 3.5x per iteration for the
 #: same results; docs/benchmarks.md, "Volumetric")
@@ -225,6 +230,37 @@ def check_closed(mesh: Mesh) -> None:
             f"{mesh.n_nonmanifold_edges} edge(s) have more than two faces; repair the mesh "
             "or deform without --volumetric"
         )
+    bad = _misoriented_edge(mesh.faces)
+    if bad is not None:
+        raise InputError(
+            f"{mesh.name}: volumetric ARAP needs consistently oriented faces, but the two "
+            f"faces on edge {bad[0]}-{bad[1]} both run it in the same direction; orient the "
+            "faces consistently (e.g. trimesh.repair.fix_winding) or deform without "
+            "--volumetric"
+        )
+
+
+def _misoriented_edge(faces: np.ndarray) -> tuple[int, int] | None:
+    """An edge that two faces traverse in the same direction, or None.
+
+    On a closed, consistently oriented surface every directed edge occurs exactly once.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> tet = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    >>> flipped = tet.copy()
+    >>> flipped[3] = [1, 3, 2]
+    >>> _misoriented_edge(tet) is None, _misoriented_edge(flipped)
+    (True, (1, 3))
+    """
+    F = np.asarray(faces, dtype=np.int64)
+    directed = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    uniq, counts = np.unique(directed, axis=0, return_counts=True)
+    if (counts == 1).all():
+        return None
+    i, j = uniq[np.argmax(counts > 1)]
+    return (int(min(i, j)), int(max(i, j)))
 
 
 @dataclass
@@ -297,12 +333,14 @@ def tetrahedralise(mesh: Mesh, density: float = DEFAULT_DENSITY, threads: int = 
     diag = mesh.bounding_box_diagonal
     spacing = lattice_spacing(mean_edge, diag, density)
     seeds = interior_lattice(mesh, spacing)
-    # fTetWild crashed (segmentation fault) when its target edge length came within about
-    # 3x of its envelope (the thin default bar at density < 2): finer targets are raised to
-    # 4x; a smaller envelope instead made bunny00 2-3x slower to mesh. The interior points
-    # come from the lattice, not from this target
-    ela = max(spacing, MIN_EDGE_OVER_ENVELOPE * ENVELOPE * diag)
+    # The interior points come from the lattice. fTetWild's target edge length only places
+    # its own background grid when it does not optimise, so it is kept coarse (a finer grid
+    # mixed in with the lattice made the thick bar's bend lose 1.5 % instead of 1 %); and it
+    # crashed (segmentation fault) when that target came within about 3x of its envelope
+    ela = max(spacing, COARSE_TARGET * diag, MIN_EDGE_OVER_ENVELOPE * ENVELOPE * diag)
     faces = remap[mesh.faces]
+    if mesh_volume(V, mesh.faces) < 0:  # inward-facing: fTetWild keeps what the faces enclose
+        faces = faces[:, ::-1]
     # fTetWild's surface tree (an AABB tree over the faces in the order given) is only as
     # good as that order: bunny00's own face order made one of its passes take 25 s of the
     # 28; in Morton order the whole mesher takes 2.5 s, with the same tets
