@@ -186,6 +186,13 @@ def test_interior_lattice_keeps_its_clearance_from_the_surface():
     assert np.sqrt(d2).min() >= 0.3
 
 
+@needs_mesher
+def test_a_lattice_too_fine_is_refused_in_one_line():
+    with pytest.raises(InputError, match=r"bar: interior density 0.01 would seed .* lattice "
+                                         r"points .*use a larger --interior-density"):
+        tetrahedralise(bar(5.0, 1.0, 1.0, (10, 2, 2)), density=0.01)
+
+
 def test_lattice_spacing_is_bounded_by_the_diagonal():
     assert lattice_spacing(0.2, 10.0, 1.0) == pytest.approx(0.25)  # 10 / 40
     assert lattice_spacing(0.2, 10.0, 0.5) == pytest.approx(0.125)

@@ -95,6 +95,9 @@ COARSE_TARGET = 0.12
 #: this (20 kept less volume on the hand and elephant, 60 cost up to 3.5x per iteration for the
 #: same results; docs/benchmarks.md, "Volumetric")
 MAX_LATTICE_CELLS = 40
+#: a finer lattice is refused (memory and time grow with its cube; density 1 seeds at most
+#: 41^3, about 7e4)
+MAX_LATTICE_POINTS = 5e6
 #: lattice points are kept this many spacings away from the surface (closer ones would make
 #: flat tets against it)
 LATTICE_CLEARANCE = 0.5
@@ -332,6 +335,12 @@ def tetrahedralise(mesh: Mesh, density: float = DEFAULT_DENSITY, threads: int = 
     remap[used] = np.arange(len(used))
     diag = mesh.bounding_box_diagonal
     spacing = lattice_spacing(mean_edge, diag, density)
+    cells = float(np.prod(np.floor(np.ptp(V, axis=0) / spacing) + 1))
+    if cells > MAX_LATTICE_POINTS:
+        raise InputError(
+            f"{mesh.name}: interior density {density:g} would seed {cells:.3g} lattice points "
+            f"(at most {MAX_LATTICE_POINTS:.0e}); use a larger --interior-density"
+        )
     seeds = interior_lattice(mesh, spacing)
     # The interior points come from the lattice. fTetWild's target edge length only places
     # its own background grid when it does not optimise, so it is kept coarse (a finer grid
