@@ -8,6 +8,7 @@ the reason.  The server-side test runs everywhere.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import io
 import json
 import socket
@@ -144,6 +145,22 @@ def _non_background_fraction(png: bytes) -> float:
     return float(np.mean(np.abs(img - background).sum(axis=-1) > 0.1))
 
 
+@contextlib.contextmanager
+def _browser_page(sync_playwright, app: EditorApp):
+    """Chromium showing the editor: yields (page, the server's handle on that client)."""
+    with sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS,
+                                    headless=True)
+        try:
+            page = browser.new_page(viewport={"width": 1200, "height": 800})
+            page.goto(app.url)
+            page.wait_for_selector("canvas", timeout=30_000)
+            wait_for(lambda: len(app.server.get_clients()) == 1, 30, "the page to connect")
+            yield page, next(iter(app.server.get_clients().values()))
+        finally:
+            browser.close()
+
+
 def test_browser_drag_deforms_mesh(tmp_path):
     sync_playwright = _browser_or_skip()
     app = bar_app(tmp_path / "out")
@@ -152,55 +169,44 @@ def test_browser_drag_deforms_mesh(tmp_path):
         st = app.state
         tip = st.handle("free end")
         before = app.served_vertices()[tip.vertices].copy()
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS,
-                                        headless=True)
-            try:
-                page = browser.new_page(viewport={"width": 1200, "height": 800})
-                page.goto(app.url)
-                page.wait_for_selector("canvas", timeout=30_000)
-                wait_for(lambda: len(app.server.get_clients()) == 1, 30, "the page to connect")
-                client = next(iter(app.server.get_clients().values()))
+        with _browser_page(sync_playwright, app) as (page, client):
+            # Look at the free end from the front so its gizmo is easy to reach.
+            g = tip.position.copy()
+            eye = g + np.array([0.0, -4.0, 1.0])
+            # position first: moving the camera drags its look-at point along.
+            client.camera.position = tuple(eye)
+            client.camera.look_at = tuple(g)
+            wait_for(lambda: np.allclose(client.camera.look_at, g, atol=1e-3)
+                     and np.allclose(client.camera.position, eye, atol=1e-3), 30,
+                     "the camera to move")
+            canvas = page.locator("canvas").first
+            box = canvas.bounding_box()
+            # The scene area: left of the GUI panel, below the notifications.
+            scene = {"x": box["x"], "y": box["y"] + 160, "width": box["width"] - 360,
+                     "height": box["height"] - 160}
+            wait_for(lambda: _non_background_fraction(page.screenshot(clip=scene)) > 0.05,
+                     30, "the mesh to be drawn (canvas stays blank)")
+            page.screenshot(path=str(tmp_path / "before.png"))
 
-                # Look at the free end from the front so its gizmo is easy to reach.
-                g = tip.position.copy()
-                eye = g + np.array([0.0, -4.0, 1.0])
-                # position first: moving the camera drags its look-at point along.
-                client.camera.position = tuple(eye)
-                client.camera.look_at = tuple(g)
-                wait_for(lambda: np.allclose(client.camera.look_at, g, atol=1e-3)
-                         and np.allclose(client.camera.position, eye, atol=1e-3), 30,
-                         "the camera to move")
-                canvas = page.locator("canvas").first
-                box = canvas.bounding_box()
-                # The scene area: left of the GUI panel, below the notifications.
-                scene = {"x": box["x"], "y": box["y"] + 160, "width": box["width"] - 360,
-                         "height": box["height"] - 160}
-                wait_for(lambda: _non_background_fraction(page.screenshot(clip=scene)) > 0.05,
-                         30, "the mesh to be drawn (canvas stays blank)")
-                page.screenshot(path=str(tmp_path / "before.png"))
-
-                # Grab the gizmo's z arrow halfway along and drag it upwards.
-                cam = client.camera
-                view = CameraView(np.asarray(cam.position), np.asarray(cam.wxyz),
-                                  float(cam.fov), float(cam.aspect))
-                arrow = g + 0.5 * 0.12 * app._diag * np.array([0.0, 0.0, 1.0])
-                uv, _ = view.project(arrow[None])
-                x = box["x"] + uv[0, 0] * box["width"]
-                y = box["y"] + uv[0, 1] * box["height"]
-                page.mouse.move(x, y)
-                page.mouse.down()
-                for k in range(1, 11):
-                    page.mouse.move(x, y - 10 * k)
-                    time.sleep(0.05)
-                page.mouse.up()
-                wait_for(lambda: st.handle("free end").position[2] > g[2] + 0.1, 30,
-                         "the gizmo drag to reach the server")
-                assert app.wait_idle(60)
-                time.sleep(1.0)
-                page.screenshot(path=str(tmp_path / "after.png"))
-            finally:
-                browser.close()
+            # Grab the gizmo's z arrow halfway along and drag it upwards.
+            cam = client.camera
+            view = CameraView(np.asarray(cam.position), np.asarray(cam.wxyz),
+                              float(cam.fov), float(cam.aspect))
+            arrow = g + 0.5 * 0.12 * app._diag * np.array([0.0, 0.0, 1.0])
+            uv, _ = view.project(arrow[None])
+            x = box["x"] + uv[0, 0] * box["width"]
+            y = box["y"] + uv[0, 1] * box["height"]
+            page.mouse.move(x, y)
+            page.mouse.down()
+            for k in range(1, 11):
+                page.mouse.move(x, y - 10 * k)
+                time.sleep(0.05)
+            page.mouse.up()
+            wait_for(lambda: st.handle("free end").position[2] > g[2] + 0.1, 30,
+                     "the gizmo drag to reach the server")
+            assert app.wait_idle(60)
+            time.sleep(1.0)
+            page.screenshot(path=str(tmp_path / "after.png"))
         moved = st.handle("free end").position - g
         served = app.served_vertices()[tip.vertices]
         # the served tip follows the gizmo (mostly upwards), the energy is finite
@@ -265,27 +271,17 @@ def test_browser_opens_mesh_right_way_up(tmp_path, name, up):
     sync_playwright = _browser_or_skip()
     app = example_app(name, tmp_path)
     try:
-        with sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS,
-                                        headless=True)
-            try:
-                page = browser.new_page(viewport={"width": 1200, "height": 800})
-                page.goto(app.url)
-                page.wait_for_selector("canvas", timeout=30_000)
-                wait_for(lambda: len(app.server.get_clients()) == 1, 30, "the page to connect")
-                client = next(iter(app.server.get_clients().values()))
-                wait_for(lambda: _camera_reported(client), 30, "the browser to report its camera")
-                wait_for(lambda: np.allclose(client.camera.up_direction, up, atol=1e-3), 10,
-                         f"the page's camera up direction to become {up}")
+        with _browser_page(sync_playwright, app) as (_, client):
+            wait_for(lambda: _camera_reported(client), 30, "the browser to report its camera")
+            wait_for(lambda: np.allclose(client.camera.up_direction, up, atol=1e-3), 10,
+                     f"the page's camera up direction to become {up}")
 
-                def looks_down_from_above() -> bool:
-                    cam = client.camera
-                    return (np.asarray(cam.position) - np.asarray(cam.look_at)) @ up > 0
+            def looks_down_from_above() -> bool:
+                cam = client.camera
+                return (np.asarray(cam.position) - np.asarray(cam.look_at)) @ up > 0
 
-                # the browser reports position and look-at in separate messages: one CI run
-                # saw the new look-at with the page's initial position (3, 3, 3)
-                wait_for(looks_down_from_above, 10, "the camera to sit above what it looks at")
-            finally:
-                browser.close()
+            # the browser reports position and look-at in separate messages: one CI run
+            # saw the new look-at with the page's initial position (3, 3, 3)
+            wait_for(looks_down_from_above, 10, "the camera to sit above what it looks at")
     finally:
         app.stop()
