@@ -16,8 +16,8 @@ import numpy as np
 
 from .mesh import Mesh
 
-__all__ = ["FOLD_DEGREES", "dihedral_angles", "folded_edge_fraction", "volume",
-           "volume_change"]
+__all__ = ["FOLD_DEGREES", "dihedral_angles", "enclosed_volume", "folded_edge_fraction",
+           "volume", "volume_change"]
 
 #: dihedral change above which an edge counts as folded
 FOLD_DEGREES = 60.0
@@ -80,11 +80,25 @@ def folded_edge_fraction(mesh: Mesh, P: np.ndarray, degrees: float = FOLD_DEGREE
     return float(np.mean(change > np.radians(degrees)))
 
 
+def enclosed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Signed volume enclosed by a closed, consistently oriented triangle mesh.
+
+    Divergence theorem: the sum over faces of ``a . (b x c) / 6``.
+
+    Examples
+    --------
+    >>> from arapkit.shapes import bar
+    >>> m = bar(5.0, 1.0, 1.0, (10, 2, 2))
+    >>> round(enclosed_volume(m.vertices, m.faces), 9)
+    5.0
+    """
+    a, b, c = (vertices[faces[:, i]] for i in range(3))
+    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+
+
 def volume(mesh: Mesh, P: np.ndarray) -> float:
     """Signed volume enclosed by the faces at positions P (divergence theorem)."""
-    F = mesh.faces
-    return float(np.einsum("ij,ij->i", P[F[:, 0]], np.cross(P[F[:, 1]], P[F[:, 2]])).sum()
-                 / 6.0)
+    return enclosed_volume(P, mesh.faces)
 
 
 def volume_change(mesh: Mesh, P: np.ndarray) -> float:

@@ -42,6 +42,7 @@ import numpy as np
 
 from .errors import InputError
 from .mesh import Mesh
+from .quality import enclosed_volume as mesh_volume  # the name this module has always used
 from .rings import check_rings
 from .solver import Deformer, Result, check_handles
 
@@ -613,20 +614,6 @@ def extend_rings(rings, tm: TetMesh) -> np.ndarray:
         return r
     _, near = cKDTree(tm.vertices[:n]).query(tm.vertices[n:])
     return np.concatenate([r, r[near]])
-
-
-def mesh_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Signed volume enclosed by a closed, consistently oriented triangle mesh.
-
-    Examples
-    --------
-    >>> from arapkit.shapes import bar
-    >>> m = bar()
-    >>> round(abs(mesh_volume(m.vertices, m.faces)), 6) > 0
-    True
-    """
-    a, b, c = (vertices[faces[:, i]] for i in range(3))
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
 
 
 def save_volume(path, vertices: np.ndarray, tets: np.ndarray) -> None:
