@@ -53,6 +53,7 @@ from arapkit.volume import (
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "tests"))
 from selfintersect import self_intersecting_faces  # noqa: E402
+from tet_arap_oracle import libigl_tet_arap  # noqa: E402
 
 DATA = HERE.parents[1] / "shared" / "data" / "meshes"
 EXAMPLES = HERE.parent / "examples"
@@ -107,18 +108,6 @@ def row(label: str, m: dict) -> str:
             f"solve {m['solve_s']:6.2f} s")
 
 
-def libigl_tet_arap(tm, handles, targets, max_iter: int = 1000):
-    """libigl's tetrahedral ARAP on the same tets: an independent reference (surface rows)."""
-    import igl
-
-    data = igl.ARAPData()
-    data.max_iter = max_iter
-    igl.arap_precomputation(tm.vertices, tm.tets.astype(np.int64), 3,
-                            np.asarray(handles, dtype=np.int32), data)
-    U = igl.arap_solve(targets, data, tm.vertices.copy())
-    return U[: tm.n_surface]
-
-
 def run_cases(args) -> None:
     for name in args.cases:
         mesh, h, t = case(name)
@@ -137,7 +126,7 @@ def run_cases(args) -> None:
                 label = f"volume {w} d={density:g} ({tm.n_vertices - tm.n_surface} in)"
                 print(row(label, measure(mesh, h, t, res, rest)), flush=True)
             if args.libigl:
-                U = libigl_tet_arap(tm, h, t)
+                U = libigl_tet_arap(tm, h, t, 1000)
                 v0 = mesh_volume(mesh.vertices, mesh.faces)
                 if not np.isfinite(U).all():  # its cotangent weights on slivers
                     print(f"  {'libigl tet ARAP, same tets':<28} non-finite result", flush=True)

@@ -336,6 +336,7 @@ def tetrahedralise(mesh: Mesh, density: float = DEFAULT_DENSITY, threads: int = 
     remap[used] = np.arange(len(used))
     diag = mesh.bounding_box_diagonal
     spacing = lattice_spacing(mean_edge, diag, density)
+    # counted, not built: the lattice's axes at a tiny spacing would not fit in memory
     cells = float(np.prod(np.floor(np.ptp(V, axis=0) / spacing) + 1))
     if cells > MAX_LATTICE_POINTS:
         raise InputError(
