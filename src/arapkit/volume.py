@@ -322,12 +322,12 @@ def tetrahedralise(mesh: Mesh, density: float = DEFAULT_DENSITY, threads: int = 
     >>> bool((tm.vertices[:tm.n_surface] == bar().vertices).all())   # doctest: +SKIP
     True
     """
+    check_closed(mesh)  # a surface that bounds no volume is refused with or without the mesher
     if _ftetwild() is None:
         raise InputError(MESHER_HINT)
     density = float(density)
     if not (np.isfinite(density) and density > 0):
         raise InputError(f"interior density must be a positive number, got {density!r}")
-    check_closed(mesh)
     V, E = mesh.vertices, mesh.edges
     mean_edge = float(np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1).mean())
     t0 = time.perf_counter()
@@ -699,12 +699,14 @@ class VolumetricDeformer:
                  **options) -> None:
         self.mesh = mesh
         handles = check_handles(mesh, handles)
-        check_closed(mesh)
         if tet is None:
-            tet = tetrahedralise(mesh, density)
-        elif tet.n_surface != mesh.n_vertices or not np.array_equal(
-                tet.vertices[:tet.n_surface], mesh.vertices):
-            raise InputError(f"{mesh.name}: the given tet mesh was not made from this surface")
+            tet = tetrahedralise(mesh, density)  # refuses surfaces that bound no volume
+        else:
+            check_closed(mesh)
+            if tet.n_surface != mesh.n_vertices or not np.array_equal(
+                    tet.vertices[:tet.n_surface], mesh.vertices):
+                raise InputError(
+                    f"{mesh.name}: the given tet mesh was not made from this surface")
         self.tet = tet
         t0 = time.perf_counter()
         self.graph, self.w = volume_graph(mesh, tet, weights)
