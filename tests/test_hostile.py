@@ -111,7 +111,54 @@ def test_huge_targets_stop_the_solve_and_write_nothing(capsys, files, motion):
     (tmp / "far.json").write_text(json.dumps([{"indices": base}, {"indices": tip, **motion}]))
     line = cli_refuses(capsys, tmp, "deform", tmp / "bar.off", "--handles", tmp / "far.json",
                        "-o", tmp / "o.ply", "--report", tmp / "r.json")
-    assert "too large for double precision" in line and "bar.off" in line
+    # the handle file put the target there: it is named, with the group and vertex, not the mesh
+    assert f"far.json: handle group 2: target of vertex {tip[0]} reaches 1e+308" in line
+    assert "bar.off" not in line
+
+
+def test_huge_def_transform_names_the_def_file(capsys, files, mesh):
+    from arapkit.handles import save_def, save_sel
+
+    tmp, base, tip = files
+    save_sel(tmp / "a.sel", mesh.n_vertices, base, tip)
+    M = np.eye(4)
+    M[0, 3] = 1e300
+    save_def(tmp / "far.def", M)
+    line = cli_refuses(capsys, tmp, "deform", tmp / "bar.off", "--handles", tmp / "a.sel",
+                       "--transform", tmp / "far.def", "-o", tmp / "o.ply")
+    assert f"far.def: handle group 2 ('handle'): target of vertex {tip[0]} reaches 1e+300" in line
+    # an overflowing matrix product (inf targets) is caught by the same rule
+    M[0, 0] = 1e308
+    save_def(tmp / "far.def", M)
+    line = cli_refuses(capsys, tmp, "deform", tmp / "bar.off", "--handles", tmp / "a.sel",
+                       "--transform", tmp / "far.def", "-o", tmp / "o.ply")
+    assert "far.def: handle group 2 ('handle'): target of vertex" in line and "inf" in line
+
+
+def test_target_reach_is_the_mesh_number_range(tmp_path, mesh):
+    from arapkit.mesh import COORDINATE_RANGE
+
+    x = mesh.vertices[:, 0]
+    base = np.flatnonzero(x <= x.min() + 1e-9).tolist()
+    tip = np.flatnonzero(x >= x.max() - 1e-9).tolist()
+    p = tmp_path / "h.json"
+    # at the limit the targets load and the solve stays finite: the rule refuses nothing
+    # the solver can do (the bar is 7 units long, so the limit is 1e150 itself)
+    p.write_text(json.dumps([{"indices": base},
+                             {"indices": tip, "translate": [COORDINATE_RANGE, 0, 0]}]))
+    hs = load_handles(p, mesh.vertices)
+    res = Deformer(mesh, hs.indices).solve(hs.targets, max_iter=3)
+    assert np.isfinite(res.vertices).all()
+    p.write_text(json.dumps([{"indices": base},
+                             {"indices": tip, "translate": [2 * COORDINATE_RANGE, 0, 0]}]))
+    with pytest.raises(InputError, match=rf"h.json: handle group 2: target of vertex {tip[0]} "
+                                         r"reaches 2e\+150"):
+        load_handles(p, mesh.vertices)
+    # a tiny mesh: the limit is 1e150 of its extents (0.07 units long: 7e148)
+    small = mesh.vertices * 0.01
+    p.write_text(json.dumps([{"indices": base}, {"indices": tip, "translate": [1e149, 0, 0]}]))
+    with pytest.raises(InputError, match=r"at most 7e\+148"):
+        load_handles(p, small)
 
 
 def test_api_huge_targets_raise_not_nan(mesh):
@@ -587,13 +634,21 @@ def test_load_handles_huge_numbers(tmp_path, mesh):
                 load_handles(p, mesh.vertices)
 
 
-def test_sel_status_beyond_c_integer(tmp_path, mesh):
+def test_sel_status_other_than_0_1_2_is_refused(tmp_path, mesh):
     from arapkit.handles import load_sel
 
     p = tmp_path / "a.sel"
-    p.write_text("\n".join(["0"] + ["1" + "0" * 30] * (mesh.n_vertices - 2) + ["2"]))
-    hs = load_sel(p, mesh.vertices)  # huge statuses are "free", as any other code
-    assert hs.indices.tolist() == [0, mesh.n_vertices - 1]
+    statuses = ["0"] + ["1"] * (mesh.n_vertices - 2) + ["2"]
+    p.write_text("\n".join(statuses))
+    assert load_sel(p, mesh.vertices).indices.tolist() == [0, mesh.n_vertices - 1]
+    # any code other than 0, 1, 2 is refused with its line (a comment line counts as one)
+    for bad, shown in (("7", "7"), ("-1", "-1"), ("1" + "0" * 30, "1" + "0" * 30)):
+        lines = ["# statuses"] + statuses[:]
+        lines[5] = bad
+        p.write_text("\n".join(lines))
+        with pytest.raises(InputError) as e:
+            load_sel(p, mesh.vertices)
+        assert str(e.value) == f"{p}:6: status {shown} is not one of 0, 1, 2"
 
 
 def test_file_names_with_nul_bytes(mesh):

@@ -54,6 +54,7 @@ import numpy as np
 from .errors import InputError, worded_for
 from .jobs import DEFAULT_ENERGY, ENERGIES, DeformJob
 from .solver import check_method
+from .validate import read_input
 from .weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = [
@@ -282,11 +283,7 @@ enclosed in double quotes at column 2)
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a folder, expected a JSON Lines job file") from None
+        text = read_input(path, "job files").decode("utf-8")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text file") from None
     base = path.resolve().parent

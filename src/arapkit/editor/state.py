@@ -713,16 +713,11 @@ class EditorState:
     def read_session(path: str | os.PathLike[str]) -> dict[str, Any]:
         """Parse a session file, with a one-line error for a bad one."""
         try:
-            text = Path(path).read_bytes()
-        except OSError as exc:
-            raise InputError(f"{path}: cannot read session ({exc.strerror or exc})") from None
-        except ValueError:  # the OS refuses names with a NUL byte
-            raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)") from None
-        try:
-            d = validate.parse_json(text, str(path))
+            d = validate.parse_json(validate.read_input(path, "sessions"), str(path))
         except InputError as exc:
-            why = str(exc).removeprefix(f"{path}: ")
-            raise InputError(f"{path}: cannot read session ({why})") from None
+            shown = repr(str(path)) if "\0" in str(path) else str(path)  # never print a NUL
+            why = str(exc).removeprefix(f"{shown}: ")
+            raise InputError(f"{shown}: cannot read session ({why})") from None
         if not isinstance(d, dict):
             raise InputError(f"{path}: a session must be a JSON object")
         return d
