@@ -577,15 +577,16 @@ def _tokens(path: Path, what: str) -> Iterator[tuple[int, str]]:
             yield number, token
 
 
-def _int_tokens(path: Path, what: str, expected: int | None = None,
+def _int_tokens(path: Path, what: str, kind: str, expected: int | None = None,
                 allowed: range | None = None) -> list[int]:
     """The whitespace-separated integers of a text file (Python ints: no size limit).
 
     A token that is not an integer, or outside ``allowed``, is named with its line.
-    With ``expected``, reading stops at the first token beyond that count.
+    With ``expected``, reading stops at the first token beyond that count. ``kind`` names
+    the kind of file for the size cap's message.
     """
     out: list[int] = []
-    for number, t in _tokens(path, f"{what} files"):
+    for number, t in _tokens(path, kind):
         # ASCII digits with one optional sign: "--1" and "²" pass str.isdigit but not int()
         if not _INTEGER.fullmatch(t) or len(t) > 4000:
             shown = t if len(t) <= 40 else t[:37] + "..."
@@ -665,7 +666,7 @@ def load_sel(
     path = Path(path)
     V = np.asarray(vertices, dtype=np.float64)
     # any other code is a typo or another format: refused, not silently "free"
-    status = np.array(_int_tokens(path, "status", len(V), range(3)), dtype=np.int8)
+    status = np.array(_int_tokens(path, "status", ".sel files", len(V), range(3)), dtype=np.int8)
     if len(status) != len(V):
         raise InputError(f"{path}: {len(status)} vertex statuses for a mesh of {len(V)} vertices")
     fixed, moved = np.flatnonzero(status == 0), np.flatnonzero(status == 2)
@@ -785,7 +786,7 @@ def load_rings(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
     elif name.endswith((".ply", ".ply.gz")):
         values = _rings_from_ply(path)
     else:
-        values = _int_tokens(path, "rigidity value", int(n_vertices))
+        values = _int_tokens(path, "rigidity value", "rings files", int(n_vertices))
     return _validate_rings(values, int(n_vertices), path)
 
 

@@ -509,6 +509,8 @@ def read_input(path: str | os.PathLike, what: str = "input files") -> bytes:
         with open(path, "rb") as f:
             check_input_size(os.fstat(f.fileno()).st_size, path, what)
             return f.read()
+    except InputError:
+        raise
     except FileNotFoundError:
         raise InputError(f"{path}: file not found") from None
     except IsADirectoryError:
@@ -527,23 +529,28 @@ def check_input_size(size: int, path: str | os.PathLike, what: str = "input file
     >>> check_input_size(2**40, "h.json", "handle files")
     Traceback (most recent call last):
     ...
-    arapkit.errors.InputError: h.json: 1048576.0 MiB is more than the 256 MiB allowed for \
+    arapkit.errors.InputError: h.json: 1.05e+06 MiB is more than the 256 MiB allowed for \
 handle files (set ARAPKIT_MAX_INPUT_MB to raise the cap)
     """
     cap = input_cap_mb()
     if size > cap * 2**20:
         raise InputError(
-            f"{path}: {size / 2**20:.1f} MiB is more than the {cap:g} MiB allowed "
+            f"{path}: {size / 2**20:.3g} MiB is more than the {cap:g} MiB allowed "
             f"for {what} (set {INPUT_CAP_VARIABLE} to raise the cap)"
         )
+
+
+#: bytes scanned at a time by :func:`json_depth`: its working arrays stay this small
+_SCAN_CHUNK = 2**20
 
 
 def json_depth(text: str | bytes) -> int:
     """Deepest bracket nesting of a JSON text, found without recursion.
 
-    Strings are skipped, so brackets inside them do not count. The scan uses a few bytes
-    per byte of text: a regular expression over the strings kept a backtracking record per
-    character and took over 100 times the text's size on one long string.
+    Strings are skipped, so brackets inside them do not count. The text is scanned in
+    chunks of :data:`_SCAN_CHUNK` bytes, so the scan needs little memory beyond the text
+    (a regular expression over the strings kept a backtracking record per character and
+    took over 100 times the text's size on one long string).
 
     Examples
     --------
@@ -553,20 +560,23 @@ def json_depth(text: str | bytes) -> int:
     3
     """
     data = text.encode("utf-8", "surrogatepass") if isinstance(text, str) else bytes(text)
-    # escapes, left to right as a JSON reader takes them: first every escaped backslash,
-    # then every escaped quote; what is left of the quotes opens and closes strings
-    data = data.replace(b"\\\\", b"__").replace(b'\\"', b"__")
-    b = np.frombuffer(data, dtype=np.uint8)
-    quote = b == ord('"')
-    # parity of the quotes so far, counted in uint8 (wrapping keeps the parity)
-    outside = (np.cumsum(quote, dtype=np.uint8) & 1) == 0
-    del quote
-    opens = ((b == ord("[")) | (b == ord("{"))) & outside
-    closes = ((b == ord("]")) | (b == ord("}"))) & outside
-    del outside
-    step = opens.astype(np.int8) - closes.astype(np.int8)
-    step = step[opens | closes]  # brackets only: a text is mostly other characters
-    return int(np.cumsum(step, dtype=np.int32).max(initial=0))
+    if b"\\" in data:
+        # escapes, left to right as a JSON reader takes them: first every escaped
+        # backslash, then every escaped quote; the quotes left open and close strings
+        data = data.replace(b"\\\\", b"__").replace(b'\\"', b"__")
+    inside, depth, deepest = 0, 0, 0
+    for start in range(0, len(data), _SCAN_CHUNK):
+        b = np.frombuffer(data, np.uint8, min(_SCAN_CHUNK, len(data) - start), start)
+        # quote parity so far, counted in uint8 (wrapping keeps the parity)
+        in_string = (np.cumsum(b == ord('"'), dtype=np.uint8) + inside) & 1
+        inside = int(in_string[-1])
+        opens = ((b == ord("[")) | (b == ord("{"))) & (in_string == 0)
+        closes = ((b == ord("]")) | (b == ord("}"))) & (in_string == 0)
+        step = opens.astype(np.int64) - closes
+        level = np.cumsum(step[opens | closes]) + depth
+        if len(level):
+            deepest, depth = max(deepest, int(level.max())), int(level[-1])
+    return deepest
 
 
 def parse_json(text: str | bytes, source: str, limit: int = MAX_JSON_DEPTH) -> Any:
