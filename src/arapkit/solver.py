@@ -275,13 +275,13 @@ class Deformer:
     # -- configuration (lazy refactorisation, as CGAL) -----------------------------
     def set_handles(self, handles) -> None:
         """Use a new handle set; the factorisation is redone at the next solve."""
+        self._laplacian_editor = None
         if self.embedded is not None:
             from .embedded import EmbeddedDeformation
 
             self.embedded = EmbeddedDeformation(self.mesh, handles, len(self.embedded.nodes))
             return
         self.problem = self.problem.with_handles(handles)
-        self._laplacian_editor = None
 
     def set_rings(self, rings) -> None:
         """Use a new rigidity map (int or per-vertex); rebuilds neighbourhoods and the factor."""
@@ -446,12 +446,15 @@ class Deformer:
             raise InputError(f"unknown init '{mode}' (use {' or '.join(INITS)})")
         if mode == "identity":
             return None
+        # embedded deformation has no problem: its constrained vertices are the handles
+        p = self.problem
         if self._laplacian_editor is None:
             from .laplacian import LaplacianEditor
 
-            self._laplacian_editor = LaplacianEditor(self.mesh, self.problem.constrained,
-                                                     "uniform")
-        return self._laplacian_editor.solve(self.problem.constrained_targets(targets))
+            self._laplacian_editor = LaplacianEditor(
+                self.mesh, self.handles if p is None else p.constrained, "uniform")
+        return self._laplacian_editor.solve(targets if p is None else
+                                            p.constrained_targets(targets))
 
     # -- the solve ----------------------------------------------------------------
     def solve(
@@ -488,7 +491,9 @@ class Deformer:
             raise InputError(f"accelerate: Anderson acceleration is for the local/global "
                              f"descent methods; energy '{self.energy}' is not one")
         if self.embedded is not None:
-            return self.embedded.solve(T, tol=tol, max_iter=max_iter, callback=callback)
+            # a start shape becomes node maps fitted to it (EmbeddedDeformation.fit_node_maps)
+            return self.embedded.solve(T, init=self._initial_positions(T, init), tol=tol,
+                                       max_iter=max_iter, callback=callback)
         self.prepare()
         start = self._initial_positions(T, init)
         return local_global(self.problem, self.backend, T, start, tol=tol, max_iter=max_iter,
