@@ -375,8 +375,12 @@ def _deform_command(job: dict, output: str) -> list[str]:
         cmd += ["--rings-file", job["rings_file"]]
     else:
         cmd += ["--rings", str(job["rings"])]
-    cmd += ["--weights", job["weights"], "--tol", repr(job["tol"]), "--max-iter",
-            str(job["max_iter"]), "--init", job["init"]]
+    cmd += ["--weights", job["weights"], "--energy", job["energy"], "--tol", repr(job["tol"]),
+            "--max-iter", str(job["max_iter"]), "--init", job["init"]]
+    # the method's own options and welding, as given (deform fills in the same defaults)
+    for key, flag in (("sr_alpha", "--sr-alpha"), ("nodes", "--nodes"), ("weld", "--weld")):
+        if job[key] is not None:
+            cmd.append(f"{flag}={job[key]}")
     if job["accelerate"]:
         cmd.append("--accelerate")
     return [*cmd, "-o", output]

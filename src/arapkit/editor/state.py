@@ -41,6 +41,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
 from arapkit import validate
+from arapkit.energy import offered_by
 from arapkit.errors import InputError
 from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
@@ -48,7 +49,9 @@ SESSION_FORMAT = "arapkit-editor-session"
 SESSION_VERSION = 1
 #: solver-panel methods: "arap" is r-ring ARAP with the painted map, the others name
 #: :data:`arapkit.energy.ENERGIES` (no rigidity map) or Laplacian editing
-METHODS = ("arap", "laplacian", "spokes-and-rims", "sr-arap", "embedded", "volumetric")
+#: (r-ring ARAP is "arap": it takes the painted map)
+METHODS = ("arap", "laplacian", *(e for e in offered_by("editor") if e != "rring"),
+           "volumetric")
 MAX_UNDO = 200
 
 
