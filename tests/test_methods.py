@@ -386,6 +386,16 @@ def test_cli_energy_option_runs_the_method(bar_case):
     assert np.abs(got - ref.vertices).max() < 1e-6 * m.bounding_box_diagonal
 
 
+def test_cli_offers_cgal_weights(bar_case):
+    d, m, h, t = bar_case
+    proc = cli("deform", d / "bar.off", "--handles", d / "h.json", "-o", d / "each.off",
+               "--weights", "cotan-clamped-each", "-q")
+    assert proc.returncode == 0, proc.stderr
+    ref = Deformer(m, h, weights="cotan-clamped-each").solve(t)
+    got = load_mesh(d / "each.off").vertices
+    assert np.abs(got - ref.vertices).max() < 1e-6 * m.bounding_box_diagonal
+
+
 # ---------------------------------------------------------------- embedded deformation
 
 

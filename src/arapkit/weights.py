@@ -86,7 +86,7 @@ def cotangent_weights(mesh: Mesh, clamp_corners: bool = False) -> np.ndarray:
     >>> np.round(cotangent_weights(m), 6).tolist()   # edges (0,1), (0,2), (1,2)
     [0.5, 0.5, 0.0]
     >>> obtuse = Mesh([[0, 0, 0], [2, 0, 0], [1, 0.2, 0]], [[0, 1, 2]])
-    >>> cotangent_weights(obtuse, clamp_corners=True)[0]   # edge (0,1) faces the obtuse corner
+    >>> float(cotangent_weights(obtuse, clamp_corners=True)[0])  # (0,1) faces the obtuse corner
     0.0
     """
     F = mesh.faces
