@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from arapkit import Deformer, Mesh, load_mesh
-from arapkit.shapes import bar, bar_bend
+from arapkit.mesh.shapes import bar, bar_bend
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "meshes"
 
@@ -164,7 +164,7 @@ def check_energy_factor(mesh: Mesh) -> float:
     import igl
 
     L = igl.cotmatrix(mesh.vertices, mesh.faces).tocsr()
-    from arapkit.weights import edge_weights
+    from arapkit.mesh.weights import edge_weights
 
     w = edge_weights(mesh)
     Lw = np.asarray(L[mesh.edges[:, 0], mesh.edges[:, 1]]).ravel()

@@ -7,9 +7,9 @@ import pytest
 from conftest import data_path
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.accel import Anderson
-from arapkit.shapes import bar, bar_bend, bar_two_materials
-from arapkit.solver import CholeskyFactor
+from arapkit.arap.accel import Anderson
+from arapkit.mesh.shapes import bar, bar_bend, bar_two_materials
+from arapkit.methods.deformer import CholeskyFactor
 
 
 @pytest.fixture(scope="module")
@@ -130,7 +130,7 @@ def test_new_targets_never_refactorise(bent_bar):
 
 
 def test_public_neighbourhoods_in_mesh_order(bent_bar):
-    from arapkit.rings import build_neighbourhoods
+    from arapkit.arap.rings import build_neighbourhoods
 
     m, h, _ = bent_bar
     d = Deformer(m, h, rings=2)

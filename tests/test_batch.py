@@ -24,9 +24,9 @@ import pytest
 from conftest import data_path
 
 from arapkit.cli import main
-from arapkit.fileio import read_ply_vertex_properties, save_mesh
-from arapkit.handles import parse_handles, save_def, save_rings, save_sel
-from arapkit.shapes import bar
+from arapkit.io.fileio import read_ply_vertex_properties, save_mesh
+from arapkit.io.handles import parse_handles, save_def, save_rings, save_sel
+from arapkit.mesh.shapes import bar
 
 HAVE_DASK = importlib.util.find_spec("distributed") is not None
 needs_dask = pytest.mark.skipif(not HAVE_DASK, reason="dask/distributed not installed "
@@ -262,7 +262,7 @@ def test_batch_without_dask_says_how_to_install(data, monkeypatch, capsys):
 
 @needs_dask
 def test_library_run_returns_summary_rows(data, cluster, monkeypatch):
-    from arapkit import batch
+    from arapkit.workflows import batch
 
     folder, mesh, jobs = data
     monkeypatch.chdir(folder)  # job paths given as objects are relative to the current folder
@@ -278,7 +278,7 @@ def test_library_run_returns_summary_rows(data, cluster, monkeypatch):
 
 
 def test_job_hash_follows_parameters_and_input_files(tmp_path):
-    from arapkit.batch import job_hash, normalise_job
+    from arapkit.workflows.batch import job_hash, normalise_job
 
     m = bar(segments=(7, 1, 1))
     save_mesh(tmp_path / "m.off", m.vertices, m.faces)
@@ -302,7 +302,7 @@ def test_job_hash_follows_parameters_and_input_files(tmp_path):
 
 @needs_dask
 def test_augment_is_reproducible_and_runs(data, cluster):
-    from arapkit.batch import augment_jobs
+    from arapkit.workflows.batch import augment_jobs
 
     folder, mesh, _ = data
     a = augment_jobs([folder / "bar.off"], 3, seed=7)
@@ -358,8 +358,8 @@ def _sequences(mesh):
 
 @needs_dask
 def test_learn_sequences_on_dask_equal_one_process(cluster):
-    from arapkit.batch import dask_map
-    from arapkit.learn import learn_rings, learn_rings_sequences
+    from arapkit.learn.fit import learn_rings, learn_rings_sequences
+    from arapkit.workflows.batch import dask_map
 
     mesh = bar(segments=(35, 3, 3))
     seq_a, seq_b, seq_c = _sequences(mesh)
@@ -375,7 +375,7 @@ def test_learn_sequences_on_dask_equal_one_process(cluster):
     np.testing.assert_array_equal(dist.rings, one.rings)
     assert len(np.unique(one.rings)) > 1  # a map that says something
     # the mean is by example count: a per-sequence brute force mean agrees
-    from arapkit.learn import ring_energies
+    from arapkit.learn.fit import ring_energies
 
     tables = [ring_energies(mesh, s, 1, 4)[0] for s in seqs]
     brute = sum(len(s) * t for s, t in zip(seqs, tables)) / 5
@@ -386,8 +386,8 @@ def test_learn_sequences_on_dask_equal_one_process(cluster):
 def test_learn_panda_walk_split_in_sequences(cluster):
     """The real 61-frame walk as three sequences on the cluster: the one-process map."""
     from arapkit import Mesh
-    from arapkit.batch import dask_map
-    from arapkit.learn import learn_rings, learn_rings_sequences
+    from arapkit.learn.fit import learn_rings, learn_rings_sequences
+    from arapkit.workflows.batch import dask_map
 
     with np.load(data_path("sequences", "panda_walk_seq.npz")) as d:
         V, F = d["V"].astype(np.float64), d["F"]
@@ -517,7 +517,7 @@ def test_dry_run_counts_groups_without_dask_or_output(data, capsys, monkeypatch)
     """--dry-run resolves each job's handles (counts taken here from the box selections and
     the .sel file), reports an unreadable job as failed and writes nothing; Dask is not
     needed."""
-    from arapkit import batch
+    from arapkit.workflows import batch
 
     folder, mesh, jobs = data
     jobs = [*jobs[:2], {"mesh": "broken.off", "handles": "bend.json", "output": "broken.ply"}]
@@ -542,7 +542,7 @@ def test_dry_run_counts_groups_without_dask_or_output(data, capsys, monkeypatch)
 def test_unwritable_output_folder_is_refused_before_any_job(data, locked, capsys, monkeypatch):
     """An output folder that cannot take files is found before a cluster starts or a job
     runs, and the message names the user's path (issue: outputs checked first)."""
-    from arapkit import batch
+    from arapkit.workflows import batch
 
     folder, _, _ = data
     monkeypatch.setattr(batch, "_local_cluster",

@@ -18,7 +18,7 @@ from arapkit.editor.state import CameraView, EditorState, Handle, raycast
 from arapkit.editor.views import face_groups, ring_labels
 from arapkit.editor.worker import SolveRequest, SolveWorker
 from arapkit.errors import InputError
-from arapkit.shapes import bar
+from arapkit.mesh.shapes import bar
 
 CAP, RING = 25, 16  # vertices per end cap / per inner cross-section of the default bar
 
@@ -222,7 +222,7 @@ def test_drag_is_one_undo_step(st):
 
 
 def test_session_round_trip(st, tmp_path):
-    from arapkit.fileio import save_mesh
+    from arapkit.io.fileio import save_mesh
 
     mesh_file = tmp_path / "bar.off"
     save_mesh(mesh_file, st.mesh.vertices, st.mesh.faces)
@@ -282,7 +282,7 @@ def test_face_groups_cover_every_face_once(st):
 
 def test_cli_state_reads_handles_and_rings(tmp_path):
     from arapkit.cli.edit import build_state
-    from arapkit.handles import save_rings
+    from arapkit.io.handles import save_rings
 
     hfile = tmp_path / "h.json"
     hfile.write_text(json.dumps([

@@ -1,4 +1,4 @@
-"""Atomic writes, mesh export with vertex properties, JSON reports (arapkit.fileio)."""
+"""Atomic writes, mesh export with vertex properties, JSON reports (arapkit.io.fileio)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,7 @@ import pytest
 import trimesh
 
 from arapkit.errors import InputError
-from arapkit.fileio import (
+from arapkit.io.fileio import (
     atomic_open,
     atomic_write,
     check_output_path,

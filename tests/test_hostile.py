@@ -20,9 +20,9 @@ from arapkit import Deformer, Mesh, cli, validate
 from arapkit.editor.state import EditorState, Handle, SolverSettings
 from arapkit.editor.worker import SolveRequest, SolveWorker
 from arapkit.errors import InputError
-from arapkit.fileio import check_output_path, save_mesh
-from arapkit.handles import load_handles, load_rings
-from arapkit.shapes import bar, bar_bend
+from arapkit.io.fileio import check_output_path, save_mesh
+from arapkit.io.handles import load_handles, load_rings
+from arapkit.mesh.shapes import bar, bar_bend
 
 # ----------------------------------------------------------------------------- helpers
 
@@ -398,7 +398,7 @@ def test_coordinates_too_large_for_energy_blame_the_range(mesh):
 
 
 def test_unit_scale_refuses_spans_beyond_double():
-    from arapkit.solver import unit_scale
+    from arapkit.methods.deformer import unit_scale
 
     assert unit_scale(np.array([[0.0, 0, 0], [3e-200, 0, 0]]), "m") == 2.0 ** -662
     with pytest.raises(InputError, match="span more than double precision"):
@@ -588,7 +588,7 @@ def test_load_handles_huge_numbers(tmp_path, mesh):
 
 
 def test_sel_status_beyond_c_integer(tmp_path, mesh):
-    from arapkit.handles import load_sel
+    from arapkit.io.handles import load_sel
 
     p = tmp_path / "a.sel"
     p.write_text("\n".join(["0"] + ["1" + "0" * 30] * (mesh.n_vertices - 2) + ["2"]))

@@ -14,9 +14,9 @@ import pytest
 from conftest import data_path
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.problem import ARAPProblem
-from arapkit.shapes import bar, bar_bend
-from arapkit.weights import _corner_cotangents, edge_weights
+from arapkit.arap.problem import ARAPProblem
+from arapkit.mesh.shapes import bar, bar_bend
+from arapkit.mesh.weights import _corner_cotangents, edge_weights
 
 CGAL_DRIVER = r"""
 // Test oracle: CGAL's Surface_mesh_deformation on the whole mesh with given handles.
@@ -314,7 +314,7 @@ def cli(*args):
 def bar_case(tmp_path_factory):
     import json
 
-    from arapkit.fileio import save_mesh
+    from arapkit.io.fileio import save_mesh
 
     d = tmp_path_factory.mktemp("methods")
     m = bar()
@@ -358,7 +358,7 @@ def test_cli_energy_option_runs_the_method(bar_case):
 
 
 def test_embedded_meets_handles_descends_and_does_not_fold():
-    from arapkit.quality import folded_edge_fraction
+    from arapkit.mesh.quality import folded_edge_fraction
 
     m = bar()
     h, t = bar_bend(m, 90)

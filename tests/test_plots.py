@@ -1,4 +1,4 @@
-"""Headless figures (arapkit.plots)."""
+"""Headless figures (arapkit.plots.figures)."""
 
 from __future__ import annotations
 
@@ -10,9 +10,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from arapkit.colors import ENERGY_CMAP, RING_COLORS
 from arapkit.errors import InputError
-from arapkit.plots import (
+from arapkit.plots.colors import ENERGY_CMAP, RING_COLORS
+from arapkit.plots.figures import (
     cluster_simplify,
     deformation_figure,
     energy_curves_figure,

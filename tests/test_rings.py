@@ -7,9 +7,9 @@ import pytest
 from conftest import independent_ring_edges
 
 from arapkit import InputError, Mesh
-from arapkit.rings import build_neighbourhoods, check_rings
-from arapkit.shapes import bar
-from arapkit.weights import edge_weights
+from arapkit.arap.rings import build_neighbourhoods, check_rings
+from arapkit.mesh.shapes import bar
+from arapkit.mesh.weights import edge_weights
 
 
 def lattice(n: int = 9) -> Mesh:

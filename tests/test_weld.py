@@ -13,9 +13,9 @@ import pytest
 from conftest import data_path
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.fileio import read_ply_vertex_properties, save_mesh
-from arapkit.mesh import weld
-from arapkit.welding import soup_facts, to_source, weld_handles, weld_values
+from arapkit.io.fileio import read_ply_vertex_properties, save_mesh
+from arapkit.mesh.model import weld
+from arapkit.mesh.welding import soup_facts, to_source, weld_handles, weld_values
 
 
 def arapkit(*args) -> subprocess.CompletedProcess:
@@ -180,7 +180,7 @@ def test_weld_option_value_checked(tmp_path):
 
 def test_learn_with_weld_writes_the_input_vertices(tmp_path):
     """learn on two soups with --weld equals learn on the welded meshes, per soup vertex."""
-    from arapkit.shapes import bar
+    from arapkit.mesh.shapes import bar
 
     mesh = bar(segments=(20, 2, 2))
     # a hinge: the far half turned by 30 degrees about the middle (soft joint, rigid rest)

@@ -23,10 +23,15 @@ import weakref
 import torch as _torch
 from numpy.linalg import norm as np_norm
 
+from arapkit.arap.backends.torch_backend import (
+    TorchSystem,
+    best_rotations,
+    check_dtype,
+    fit_rotations,
+)
+from arapkit.arap.problem import ARAPProblem
 from arapkit.errors import InputError
-from arapkit.problem import ARAPProblem
-from arapkit.torch_backend import TorchSystem, best_rotations, check_dtype, fit_rotations
-from arapkit.weights import DEFAULT_WEIGHTS
+from arapkit.mesh.weights import DEFAULT_WEIGHTS
 
 __all__ = ["ARAPLayer", "arap_energy"]
 
@@ -66,7 +71,7 @@ def _bdot(a: _torch.Tensor, b: _torch.Tensor) -> _torch.Tensor:
 class _ARAPSolve(_torch.autograd.Function):
     """Local/global solve with implicit differentiation at the converged solution.
 
-    Forward: the loop of :func:`arapkit.loop.local_global` in torch ops, batched.
+    Forward: the loop of :func:`arapkit.arap.loop.local_global` in torch ops, batched.
 
     Backward: the converged free positions ``x`` satisfy ``grad_x f(x, T) = 0`` for the
     reduced energy ``f(x, T) = min_R E``, i.e. ``A x = b(x, T) - A_fc C(T)`` with
@@ -77,7 +82,7 @@ class _ARAPSolve(_torch.autograd.Function):
     (positive definite at a strict minimum): ``mu`` comes from conjugate gradients
     preconditioned by the Cholesky factor of ``A``, so each CG step costs one solve with
     the forward's factor and one vector-Jacobian product of ``b`` (through the closed-form
-    rotation derivative of :func:`arapkit.torch_backend.fit_rotations`).
+    rotation derivative of :func:`arapkit.arap.backends.torch_backend.fit_rotations`).
     """
 
     @staticmethod
@@ -154,7 +159,7 @@ class ARAPLayer(_torch.nn.Module):
     rings : int or (n,) int
         r per vertex (rigidity), held fixed.
     weights : str
-        Edge weighting (default :data:`arapkit.weights.DEFAULT_WEIGHTS`).
+        Edge weighting (default :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`).
     energy : {"rring", "spokes-and-rims"}
         The local/global energy (SR-ARAP's rotation coupling has no fixed point of one
         step alone and is not offered here).
@@ -178,7 +183,7 @@ class ARAPLayer(_torch.nn.Module):
     Examples
     --------
     >>> import torch
-    >>> from arapkit.shapes import bar, bar_bend
+    >>> from arapkit.mesh.shapes import bar, bar_bend
     >>> mesh = bar(segments=(10, 2, 2))
     >>> h, t = bar_bend(mesh, 45)
     >>> layer = ARAPLayer(mesh, h, dtype=torch.float64)
@@ -262,7 +267,7 @@ class ARAPLayer(_torch.nn.Module):
             S = ts.covariances(P)
             R = best_rotations(S)
             E = ts.energy_expanded(P, R, S)
-            # relative decrease, as arapkit.loop; every pose of the batch must pass
+            # relative decrease, as arapkit.arap.loop; every pose of the batch must pass
             if E_prev is not None:
                 rel = (E_prev - E).abs() / E_prev.abs().clamp_min(1e-300)
                 converged = bool(((rel < self.tol) | (E.abs() <= floor)).all())
@@ -304,7 +309,7 @@ def arap_energy(X: _torch.Tensor, layer_or_problem: ARAPLayer | ARAPProblem) -> 
     ----------
     X : (n, 3) or (B, n, 3) tensor
         Positions in the mesh's vertex order (float32 or float64, any device).
-    layer_or_problem : ARAPLayer or arapkit.problem.ARAPProblem
+    layer_or_problem : ARAPLayer or arapkit.arap.problem.ARAPProblem
         Gives the rest shape, weights, neighbourhoods (r) and energy; handles play no role.
 
     Returns
@@ -314,8 +319,8 @@ def arap_energy(X: _torch.Tensor, layer_or_problem: ARAPLayer | ARAPProblem) -> 
     Examples
     --------
     >>> import torch
-    >>> from arapkit.shapes import bar
-    >>> from arapkit.problem import ARAPProblem
+    >>> from arapkit.mesh.shapes import bar
+    >>> from arapkit.arap.problem import ARAPProblem
     >>> mesh = bar(segments=(10, 2, 2))
     >>> p = ARAPProblem.from_mesh(mesh, [0], rings=2)
     >>> X = torch.tensor(mesh.vertices, requires_grad=True)

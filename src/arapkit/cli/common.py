@@ -10,8 +10,8 @@ from collections.abc import Callable
 from typing import Any
 
 from arapkit import validate
+from arapkit.arap.rings import rings_summary  # noqa: F401 - re-exported for the commands
 from arapkit.errors import InputError
-from arapkit.rings import rings_summary  # noqa: F401 - re-exported for the commands
 
 __all__ = [
     "Progress",
@@ -67,7 +67,8 @@ def add_view_options(parser: argparse.ArgumentParser) -> None:
     """Add ``--view`` and ``--up`` to a command that draws figures.
 
     Read them back with ``view=args.view, up=args.up`` for the functions of
-    :mod:`arapkit.plots` (``up`` None means the guess of :func:`arapkit.orientation.guess_up`).
+    :mod:`arapkit.plots.figures` (``up`` None means the guess of
+    :func:`arapkit.mesh.orientation.guess_up`).
 
     Examples
     --------
@@ -75,7 +76,7 @@ def add_view_options(parser: argparse.ArgumentParser) -> None:
     >>> a = p.parse_args(["--view", "iso", "--up=-y"]); a.view, a.up
     ('iso', '-y')
     """
-    from arapkit.orientation import AXES, VIEWS
+    from arapkit.mesh.orientation import AXES, VIEWS
 
     def axis(text: str) -> str:
         t = text.strip().lower()
@@ -127,8 +128,9 @@ def weld_tolerance(text: str) -> float:
 
 
 def add_weld_option(p: argparse.ArgumentParser) -> None:
-    """``--weld [TOL]``: merge coincident vertices for the solve (see :mod:`arapkit.welding`)."""
-    from arapkit.welding import WELD_TOL
+    """``--weld [TOL]``: merge coincident vertices for the solve (see
+    :mod:`arapkit.mesh.welding`)."""
+    from arapkit.mesh.welding import WELD_TOL
 
     p.add_argument(
         "--weld",
@@ -148,7 +150,7 @@ def maybe_weld(mesh, tol: float | None):
     """``mesh`` welded with ``tol`` (relative), or ``mesh`` itself when ``tol`` is None."""
     if tol is None:
         return mesh
-    from arapkit.welding import weld
+    from arapkit.mesh.welding import weld
 
     return weld(mesh, tol)
 

@@ -25,7 +25,7 @@ from arapkit.cli.common import (
     warn,
 )
 from arapkit.errors import InputError
-from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
 
@@ -97,23 +97,23 @@ def _slug(label: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit compare``; returns the exit status."""
-    from arapkit.compare import (
+    from arapkit.io.fileio import save_mesh
+    from arapkit.methods.deformer import check_method
+    from arapkit.plots.figures import save_figure
+    from arapkit.workflows.compare import (
         comparison_figure,
         comparison_rows,
         format_rows,
         run_comparison,
         write_csv,
     )
-    from arapkit.fileio import save_mesh
-    from arapkit.jobs import DeformJob, load_job_inputs
-    from arapkit.plots import save_figure
-    from arapkit.solver import check_method
+    from arapkit.workflows.jobs import DeformJob, load_job_inputs
 
     t0 = time.perf_counter()
     check_method("sr-arap", args.sr_alpha)
     check_method("embedded", None, args.nodes)
     if args.volumetric:
-        from arapkit.volume import MESHER_HINT, have_mesher
+        from arapkit.methods.volumetric import MESHER_HINT, have_mesher
 
         if not have_mesher():
             raise InputError(MESHER_HINT)
@@ -128,7 +128,7 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         return _dry_run(args, mesh, hs, out)
     if args.volumetric:
-        from arapkit.volume import check_closed
+        from arapkit.methods.volumetric import check_closed
 
         check_closed(mesh)  # refuse an open surface before any method runs
 
@@ -165,7 +165,7 @@ def run(args: argparse.Namespace) -> int:
 def _dry_run(args: argparse.Namespace, mesh, hs, out: Path) -> int:
     """What ``deform --dry-run`` shows, for the comparison's handles; solves nothing."""
     from arapkit.cli.deform import describe_groups
-    from arapkit.plots import groups_figure, save_figure
+    from arapkit.plots.figures import groups_figure, save_figure
 
     print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices)")
     print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")

@@ -30,7 +30,7 @@ from arapkit.cli.common import (
     warn,
 )
 from arapkit.errors import InputError, worded_for
-from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
 
@@ -163,7 +163,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def _check_method(args: argparse.Namespace) -> dict[str, Any]:
     """Fail fast on a bad method or option; the keyword arguments for the Deformer."""
-    from arapkit.solver import check_method
+    from arapkit.methods.deformer import check_method
 
     options = check_method(args.energy, args.sr_alpha, args.nodes)
     if args.energy != "rring" and (args.rings_file or args.rings != 1):
@@ -175,7 +175,7 @@ def _check_method(args: argparse.Namespace) -> dict[str, Any]:
     return {"energy": args.energy, "sr_alpha": args.sr_alpha, "nodes": args.nodes}
 
 
-# -- volumetric ARAP (arapkit.volume) -------------------------------------------------
+# -- volumetric ARAP (arapkit.methods.volumetric) -------------------------------------------------
 
 
 def _add_volume_options(p: argparse.ArgumentParser) -> None:
@@ -205,8 +205,8 @@ def _add_volume_options(p: argparse.ArgumentParser) -> None:
 
 def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None:
     """Refuse volume options without --volumetric, a missing mesher, a bad volume path."""
-    from arapkit.fileio import check_output_path
-    from arapkit.volume import MESHER_HINT, VOLUME_FORMATS, have_mesher
+    from arapkit.io.fileio import check_output_path
+    from arapkit.methods.volumetric import MESHER_HINT, VOLUME_FORMATS, have_mesher
 
     if not args.volumetric:
         for flag, value in (("--interior-density", args.interior_density),
@@ -227,7 +227,7 @@ def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Fail fast, before loading or solving, on any output that cannot be written."""
-    from arapkit.fileio import check_figure_format, check_output_path, mesh_format
+    from arapkit.io.fileio import check_figure_format, check_output_path, mesh_format
 
     inputs = [args.mesh, args.handles, args.transform, args.rings_file]
     outs = []
@@ -254,7 +254,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 def _job(args: argparse.Namespace, method: dict[str, Any]):
     """The library's job description of these arguments."""
-    from arapkit.jobs import DeformJob
+    from arapkit.workflows.jobs import DeformJob
 
     return DeformJob(
         mesh=args.mesh,
@@ -276,8 +276,8 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit deform``; returns the exit status."""
-    from arapkit.fileio import write_json
-    from arapkit.jobs import job_report, load_job_inputs, prepare_job, save_result
+    from arapkit.io.fileio import write_json
+    from arapkit.workflows.jobs import job_report, load_job_inputs, prepare_job, save_result
 
     t0 = time.perf_counter()
     method = _check_method(args)
@@ -288,7 +288,7 @@ def run(args: argparse.Namespace) -> int:
         inputs = load_job_inputs(job, note=tell)
         return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings)
     if args.volumetric and args.weights != DEFAULT_WEIGHTS:
-        from arapkit.volume import DEFAULT_VOLUME_WEIGHTS
+        from arapkit.methods.volumetric import DEFAULT_VOLUME_WEIGHTS
 
         note(f"--weights {args.weights} applies to surface ARAP; the volume's edges use "
              f"'{DEFAULT_VOLUME_WEIGHTS}' weights (see docs/volumetric.md)", args.quiet)
@@ -320,7 +320,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report and args.report != "-":
         write_json(args.report, report)
     if args.figure:
-        from arapkit.plots import deformation_figure, save_figure
+        from arapkit.plots.figures import deformation_figure, save_figure
 
         fig = deformation_figure(
             mesh.vertices,
@@ -342,7 +342,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report == "-":
         import json
 
-        from arapkit.fileio import to_jsonable
+        from arapkit.io.fileio import to_jsonable
 
         print(json.dumps(to_jsonable(report), indent=2))
     else:
@@ -372,7 +372,7 @@ def describe_groups(vertices: np.ndarray, hs) -> list[str]:
 
     Examples
     --------
-    >>> from arapkit.handles import parse_handles
+    >>> from arapkit.io.handles import parse_handles
     >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
     >>> hs = parse_handles([{"name": "a", "indices": [0]},
     ...                     {"name": "b", "indices": [2], "translate": [0, 1, 0]}], V)
@@ -396,7 +396,7 @@ def describe_groups(vertices: np.ndarray, hs) -> list[str]:
 
 def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
     """Print what the handle file selects and how it moves it; draw it; solve nothing."""
-    from arapkit.orientation import bounding_box
+    from arapkit.mesh.orientation import bounding_box
 
     box = bounding_box(mesh.vertices)
     print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices, box min "
@@ -407,7 +407,7 @@ def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
     r = np.broadcast_to(np.asarray(rings), (mesh.n_vertices,))
     print(f"rings: r = {_describe_rings(r)}; dry run: nothing solved, no mesh written")
     if args.figure:
-        from arapkit.plots import groups_figure, save_figure
+        from arapkit.plots.figures import groups_figure, save_figure
 
         groups = [(g.name, g.indices) for g in hs.groups]
         fig = groups_figure(mesh.vertices, mesh.faces, groups, view=args.view, up=args.up,

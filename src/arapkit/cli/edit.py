@@ -109,7 +109,7 @@ def build_state(args: argparse.Namespace) -> Any:
     from arapkit import load_mesh
     from arapkit.editor.state import EditorState
     from arapkit.errors import InputError
-    from arapkit.handles import load_handles, load_rings
+    from arapkit.io.handles import load_handles, load_rings
     from arapkit.validate import ring_size as ring_size_rule
 
     if args.session:
@@ -132,14 +132,14 @@ def build_state(args: argparse.Namespace) -> Any:
     if args.rings_file:
         rings = load_rings(args.rings_file, source.n_vertices)
         if welded is not None:
-            from arapkit.welding import weld_values
+            from arapkit.mesh.welding import weld_values
 
             rings = weld_values(st.mesh, rings)
         st.rings = st._check_rings(rings)
     if args.handles:
         hs = load_handles(args.handles, source.vertices)
         if welded is not None:
-            from arapkit.welding import weld_handle_set
+            from arapkit.mesh.welding import weld_handle_set
 
             hs = weld_handle_set(st.mesh, hs)
         st.add_handle_set(hs, record=False)
@@ -149,7 +149,7 @@ def build_state(args: argparse.Namespace) -> Any:
 
 def _bar_state() -> Any:
     from arapkit.editor.state import EditorState
-    from arapkit.shapes import bar
+    from arapkit.mesh.shapes import bar
 
     mesh = bar()
     st = EditorState(mesh)
@@ -162,7 +162,7 @@ def _bar_state() -> Any:
 
 def _up(text: str | None) -> str | None:
     """``--up`` as the editor spells it ('y' = '+y'), or None to guess."""
-    from arapkit.orientation import parse_axis
+    from arapkit.mesh.orientation import parse_axis
 
     if text is None:
         return None

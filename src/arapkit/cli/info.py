@@ -69,16 +69,16 @@ def inspect_mesh(mesh) -> dict[str, Any]:
 
     Examples
     --------
-    >>> from arapkit.shapes import bar
+    >>> from arapkit.mesh.shapes import bar
     >>> facts = inspect_mesh(bar())
     >>> facts["components"], facts["boundary_loops"]
     (1, 0)
     """
     from arapkit.errors import InputError
-    from arapkit.mesh import Mesh, check_number_range, scale_free_vertices
-    from arapkit.orientation import bounding_box, guess_up
-    from arapkit.weights import cotangent_weights
-    from arapkit.welding import soup_facts
+    from arapkit.mesh.model import Mesh, check_number_range, scale_free_vertices
+    from arapkit.mesh.orientation import bounding_box, guess_up
+    from arapkit.mesh.weights import cotangent_weights
+    from arapkit.mesh.welding import soup_facts
 
     box, up = bounding_box(mesh.vertices), guess_up(mesh.vertices)
     loops = mesh.boundary_loops
@@ -176,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     facts = inspect_mesh(load_mesh_checked(args.mesh))
     facts["file"] = args.mesh
     if args.json:
-        from arapkit.fileio import to_jsonable
+        from arapkit.io.fileio import to_jsonable
 
         print(json.dumps(to_jsonable(facts), indent=2))
         return 0

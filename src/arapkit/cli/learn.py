@@ -7,7 +7,7 @@ task with ``--scheduler``) and the tables are averaged by example count. The res
 per vertex of the reference, written as text (one r per line) for
 ``arapkit deform --rings-file``.
 
-The default omega is ``auto`` (see :func:`arapkit.learn.auto_omega`), not the paper's 0.3:
+The default omega is ``auto`` (see :func:`arapkit.learn.fit.auto_omega`), not the paper's 0.3:
 on skinned animations 0.3 gives r_max on nearly every vertex, i.e. no map at all. The
 paper's value stays one option away (``--omega 0.3``), and the omega used is printed.
 
@@ -39,8 +39,8 @@ from arapkit.cli.common import (
     positive_int,
 )
 from arapkit.errors import InputError
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 from arapkit.validate import real_array
-from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["Frames", "add_parser", "expand_frames", "load_frames", "parse_omega", "run"]
 
@@ -303,7 +303,7 @@ def _check_connectivity(frames: Frames, ref: int) -> None:
 
 def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """Fail before any work on an output that cannot be written."""
-    from arapkit.fileio import check_figure_format, check_output_path, mesh_format
+    from arapkit.io.fileio import check_figure_format, check_output_path, mesh_format
 
     if args.output.lower().endswith((".ply", ".ply.gz")):
         raise InputError(f"{args.output}: the rigidity map is text or .npy; "
@@ -326,17 +326,17 @@ def _warn(message: str) -> None:
 
 def _learn_sequences(args, frames: Frames, ref: int, reference):
     """One energy table per sequence (a Dask task each with --scheduler), combined."""
-    from arapkit.learn import learn_rings_sequences
+    from arapkit.learn.fit import learn_rings_sequences
 
     seqs = [[frames.vertices[i] for i in seq if i != ref] for seq in frames.sequences]
     if getattr(reference, "welded_from", None) is not None:
-        from arapkit.welding import weld_frame
+        from arapkit.mesh.welding import weld_frame
 
         seqs = [[weld_frame(reference, p) for p in seq] for seq in seqs]
     if not args.scheduler:
         return learn_rings_sequences(reference, seqs, args.r_min, args.r_max, args.omega,
                                      args.weights)
-    from arapkit.batch import dask_map, require_dask
+    from arapkit.workflows.batch import dask_map, require_dask
 
     require_dask()
     from distributed import Client
@@ -356,7 +356,7 @@ def _learn_sequences(args, frames: Frames, ref: int, reference):
 
 def _learn(args, frames: Frames, ref: int):
     from arapkit import Mesh
-    from arapkit.learn import learn_rings
+    from arapkit.learn.fit import learn_rings
 
     if frames.meshes is not None:
         reference = frames.meshes[ref]
@@ -365,7 +365,7 @@ def _learn(args, frames: Frames, ref: int):
     others = [i for i in range(len(frames)) if i != ref]
     poses = [frames.vertices[i] for i in others]
     if getattr(args, "weld", None) is not None:
-        from arapkit.welding import weld, weld_frame
+        from arapkit.mesh.welding import weld, weld_frame
 
         # every frame shares the reference's vertices, so one weld map serves them all
         reference = weld(reference, args.weld)
@@ -391,19 +391,19 @@ def _learn(args, frames: Frames, ref: int):
 
 
 def _write(args, reference, res) -> None:
-    from arapkit.handles import save_rings
-    from arapkit.welding import to_source
+    from arapkit.io.handles import save_rings
+    from arapkit.mesh.welding import to_source
 
     # a welded reference: the map is written for the input's own vertices
     save_rings(args.output, to_source(reference, res.rings))
     if args.ply:
-        from arapkit.fileio import save_mesh
+        from arapkit.io.fileio import save_mesh
 
         for line in save_mesh(args.ply, reference.vertices, like=reference,
                               vertex_properties={"rings": res.rings.astype(np.int32)}):
             _warn(line)
     if args.energies:
-        from arapkit.fileio import atomic_open
+        from arapkit.io.fileio import atomic_open
 
         energies = to_source(reference, res.energies)
         with atomic_open(args.energies, "wb") as f:
@@ -413,8 +413,8 @@ def _write(args, reference, res) -> None:
                 cols = " ".join(f"r{r}" for r in range(res.r_min, res.r_max + 1))
                 np.savetxt(f, energies, fmt="%.9g", header=f"E_ARAP(k, r): {cols}")
     if args.figure:
-        from arapkit.learn import rings_figure
-        from arapkit.plots import save_figure
+        from arapkit.learn.fit import rings_figure
+        from arapkit.plots.figures import save_figure
 
         title = (f"{reference.name}: learned r from {_examples(res.n_examples)}, "
                  f"omega = {res.omega:.3g} ({res.omega_rule})")

@@ -9,7 +9,7 @@ The package is split so that the logic can be tested without a browser:
 
 Examples
 --------
->>> from arapkit.shapes import bar
+>>> from arapkit.mesh.shapes import bar
 >>> from arapkit.editor import EditorState
 >>> EditorState(bar()).n
 1154

@@ -12,7 +12,7 @@ Interaction model
 
 Examples
 --------
->>> from arapkit.shapes import bar
+>>> from arapkit.mesh.shapes import bar
 >>> from arapkit.editor.state import EditorState
 >>> app = EditorApp(EditorState(bar()), port=8123)  # doctest: +SKIP
 >>> print(app.url)  # doctest: +SKIP
@@ -226,7 +226,7 @@ class EditorApp:
 
     def _choose_up(self) -> None:
         """Set the up axis of a newly loaded mesh: the override, else the shared guess."""
-        from arapkit.orientation import guess_up
+        from arapkit.mesh.orientation import guess_up
 
         if self._up_override is not None:
             self.dd_up.value = self._up_override
@@ -238,7 +238,7 @@ class EditorApp:
 
     def _aim_cameras(self) -> None:
         """Look at the mesh from the front, slightly above, for the chosen up axis."""
-        from arapkit.orientation import view_frame
+        from arapkit.mesh.orientation import view_frame
 
         up_name = self.dd_up.value
         up = np.array(UP_AXES[up_name], dtype=np.float64)
@@ -494,7 +494,7 @@ class EditorApp:
             self.cb_show_handles = gui.add_checkbox("Highlight handles", True)
             self.html_legend = gui.add_html("")
         with gui.add_folder("Solver"):
-            from arapkit.weights import WEIGHT_KINDS
+            from arapkit.mesh.weights import WEIGHT_KINDS
 
             s = self.state.settings
             self.dd_method = gui.add_dropdown("Method", tuple(METHODS))
@@ -891,7 +891,7 @@ class EditorApp:
 
     def load_rings_bytes(self, name: str, data: bytes) -> np.ndarray:
         """Use an uploaded rigidity map (text, .npy or PLY with ``rings``); undoable."""
-        from arapkit.handles import load_rings
+        from arapkit.io.handles import load_rings
 
         self._check_upload(name, data, "rings files")
         with self.lock:
@@ -945,7 +945,7 @@ class EditorApp:
         A mesh that came from an upload has no file of its own, so its rest shape is
         saved next to the session first and the session names that file.
         """
-        from arapkit.fileio import save_mesh
+        from arapkit.io.fileio import save_mesh
 
         with self.lock:
             out = self._ensure_export_dir()
@@ -963,8 +963,8 @@ class EditorApp:
         Everything the mesh's file carried comes along (``save_mesh(like=...)``); a mesh
         loaded from OBJ is also exported as OBJ, which keeps its UVs and materials.
         """
-        from arapkit.fileio import save_mesh
-        from arapkit.handles import save_rings
+        from arapkit.io.fileio import save_mesh
+        from arapkit.io.handles import save_rings
 
         with self.lock:
             out = self._ensure_export_dir()

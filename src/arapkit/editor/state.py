@@ -17,7 +17,7 @@ Conventions
 
 Examples
 --------
->>> from arapkit.shapes import bar
+>>> from arapkit.mesh.shapes import bar
 >>> st = EditorState(bar())
 >>> sel = st.select_near(st.vertices[0], radius=0.05)
 >>> h = st.add_handle()
@@ -42,12 +42,12 @@ from scipy.sparse.csgraph import breadth_first_order
 
 from arapkit import validate
 from arapkit.errors import InputError
-from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 SESSION_FORMAT = "arapkit-editor-session"
 SESSION_VERSION = 1
 #: solver-panel methods: "arap" is r-ring ARAP with the painted map, the others name
-#: :data:`arapkit.energy.ENERGIES` (no rigidity map) or Laplacian editing
+#: :data:`arapkit.arap.energies.base.ENERGIES` (no rigidity map) or Laplacian editing
 METHODS = ("arap", "laplacian", "spokes-and-rims", "sr-arap", "embedded", "volumetric")
 MAX_UNDO = 200
 
@@ -336,7 +336,7 @@ class EditorState:
 
     Examples
     --------
-    >>> from arapkit.shapes import bar
+    >>> from arapkit.mesh.shapes import bar
     >>> st = EditorState(bar(), rings=2)
     >>> int(st.rings.min()), int(st.rings.max())
     (2, 2)
@@ -559,7 +559,7 @@ class EditorState:
         return True
 
     def add_handle_set(self, handle_set: Any, record: bool = True) -> list[Handle]:
-        """Add the groups of an :class:`arapkit.handles.HandleSet` (e.g. ``--handles``).
+        """Add the groups of an :class:`arapkit.io.handles.HandleSet` (e.g. ``--handles``).
 
         A group's targets become the new handle's anchor, so its gizmo starts where the
         file put it; ``fixed`` groups come in frozen.
@@ -703,7 +703,7 @@ class EditorState:
 
     def save_session(self, path: str | os.PathLike[str]) -> Path:
         """Write the session as JSON (atomically: a crash never leaves half a file)."""
-        from arapkit.fileio import write_json
+        from arapkit.io.fileio import write_json
 
         path = Path(path)
         write_json(path, self.to_dict(), indent=1)
@@ -741,7 +741,7 @@ class EditorState:
         mesh_file = Path(path).parent / mesh_path
         mesh = load_mesh(str(mesh_file))
         if d.get("weld") is not None:
-            from arapkit.welding import weld
+            from arapkit.mesh.welding import weld
 
             mesh = weld(mesh, d["weld"])
         st = cls(mesh, mesh_path=str(mesh_file))

@@ -17,7 +17,7 @@ bounded delay, and iterations run to convergence once the user stops moving.
 
 Examples
 --------
->>> from arapkit.shapes import bar, bar_bend
+>>> from arapkit.mesh.shapes import bar, bar_bend
 >>> from arapkit.editor.state import SolverSettings
 >>> mesh = bar(); h, t = bar_bend(mesh, 30)
 >>> updates = []
@@ -44,7 +44,7 @@ import numpy as np
 
 from arapkit.editor.state import SolverSettings
 from arapkit.errors import worded_for
-from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 LAPLACIAN_WEIGHTS = WEIGHT_KINDS
 

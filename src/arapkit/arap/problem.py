@@ -1,0 +1,470 @@
+"""The precomputed ARAP problem: edge graph, weights, energy structure, constraints, factor.
+
+An :class:`ARAPProblem` is what libigl calls ``ARAPData`` after ``arap_precomputation``:
+everything that does not change when only the handle *targets* change. It is immutable;
+a new handle set or a new energy (e.g. a new rigidity map) gives a new problem that shares
+the unchanged parts (:meth:`ARAPProblem.with_handles`, :meth:`ARAPProblem.with_energy`).
+
+Internally the vertices are renumbered in a bandwidth-reducing order (reverse
+Cuthill-McKee): consecutive vertices are then close on the surface, so a neighbourhood's
+vertices lie near each other in memory and the per-thread scatter windows of the CPU
+backend barely overlap. ``perm`` maps internal to caller numbering (new -> old) and
+``iperm`` the other way; every array stored here is in internal numbering except the
+handle list, which stays in the caller's.
+
+The problem can be built from a triangle :class:`~arapkit.mesh.model.Mesh`
+(:meth:`ARAPProblem.from_mesh`) or from a plain edge graph with per-edge weights
+(:meth:`ARAPProblem.from_graph`), e.g. the edges of a tetrahedral mesh.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass, field, replace
+from functools import cached_property
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import Advice, InputError
+from ..mesh.model import EdgeTopology
+from ..mesh.weights import SOUND_WEIGHTS
+from .constraints import Elimination, anchor_components, check_handles
+
+if TYPE_CHECKING:
+    from ..mesh.model import Mesh
+    from .energies.base import NeighbourhoodEnergy
+
+__all__ = ["ARAPProblem", "EdgeGraph", "bandwidth_order", "unit_scale"]
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeGraph(EdgeTopology):
+    """Rest positions and an undirected edge list (optionally with the triangles they bound).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float64
+    edges : (m, 2) int64
+        Each undirected edge once; edge ids are row numbers.
+    name : str
+        Used in error messages.
+    faces : (f, 3) int64, optional
+        Triangles, for energies defined on triangles (spokes-and-rims, SR-ARAP's area).
+    face_edges : (f, 3) int64, optional
+        Edge id of ``(F[f, c], F[f, c + 1])``; required with ``faces``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> g = EdgeGraph(np.eye(3), np.array([[0, 1], [1, 2]]))
+    >>> g.n_vertices, g.n_components
+    (3, 1)
+    """
+
+    vertices: np.ndarray
+    edges: np.ndarray
+    name: str = "graph"
+    faces: np.ndarray | None = None
+    face_edges: np.ndarray | None = None
+
+    @classmethod
+    def from_mesh(cls, mesh: Mesh) -> EdgeGraph:
+        """The edge graph of a triangle mesh (its edges keep their ids)."""
+        g = cls(mesh.vertices, mesh.edges, mesh.name, mesh.faces, mesh.face_edges)
+        # the mesh has already labelled its components: do not search again
+        g.__dict__["_components"] = (mesh.n_components, mesh.component_labels)
+        return g
+
+    @property
+    def n_vertices(self) -> int:
+        """Number of vertices."""
+        return len(self.vertices)
+
+    def scaled(self, factor: float) -> EdgeGraph:
+        """The same graph with every position multiplied by ``factor`` (components kept)."""
+        g = EdgeGraph(self.vertices * factor, self.edges, self.name, self.faces,
+                      self.face_edges)
+        g.__dict__["_components"] = (self.n_components, self.component_labels)
+        return g
+
+    def permuted(self, perm: np.ndarray, iperm: np.ndarray) -> EdgeGraph:
+        """The same graph with vertex ``perm[i]`` renamed ``i`` (edge and face ids kept)."""
+        g = EdgeGraph(
+            np.ascontiguousarray(self.vertices[perm]),
+            iperm[self.edges],
+            self.name,
+            None if self.faces is None else iperm[self.faces],
+            self.face_edges,
+        )
+        g.__dict__["_components"] = (self.n_components, self.component_labels[perm])
+        return g
+
+
+def unit_scale(vertices: np.ndarray, name: str) -> float:
+    """The power of two ``s`` with ``extent / s`` in [0.5, 1): the solver works in ``V / s``.
+
+    Dividing by a power of two is exact, so a mesh scaled by ``2**k`` gives bit-identical
+    iterations; any other scale changes nothing beyond round-off. Every tolerance inside
+    the solve (convergence floor, cotangent caps) is then relative to the mesh's own size,
+    and squared lengths neither overflow nor underflow for extents anywhere in the double
+    range.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> unit_scale(np.array([[0.0, 0, 0], [3, 0, 0]]), "m")
+    4.0
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    if len(V) < 2:
+        return 1.0
+    with np.errstate(over="ignore", invalid="ignore"):
+        extent = float(np.max(V.max(axis=0) - V.min(axis=0)))
+    if not math.isfinite(extent):
+        raise InputError(
+            f"{name}: coordinates span more than double precision can hold "
+            f"(from {V.min():.3g} to {V.max():.3g}); rescale the mesh"
+        )
+    if extent == 0:
+        return 1.0
+    return math.ldexp(1.0, math.frexp(extent)[1])
+
+
+def bandwidth_order(mesh: Mesh | EdgeGraph) -> np.ndarray:
+    """Reverse Cuthill-McKee order of the vertices (new -> old).
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar
+    >>> m = bar()
+    >>> sorted(bandwidth_order(m).tolist()) == list(range(m.n_vertices))
+    True
+    """
+    from scipy.sparse.csgraph import reverse_cuthill_mckee
+
+    return reverse_cuthill_mckee(mesh.adjacency.tocsr(), symmetric_mode=True).astype(np.int64)
+
+
+def _check_graph(vertices, edges, weights, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    V = np.ascontiguousarray(vertices, dtype=np.float64)
+    if V.ndim != 2 or V.shape[1] != 3:
+        raise InputError(f"{name}: vertices must have shape (n, 3), got {V.shape}")
+    if not np.isfinite(V).all():
+        bad = int(np.flatnonzero(~np.isfinite(V).all(axis=1))[0])
+        raise InputError(f"{name}: vertex {bad} has a non-finite coordinate")
+    E = np.asarray(edges)
+    if E.ndim != 2 or E.shape[1] != 2 or not np.issubdtype(E.dtype, np.integer):
+        raise InputError(f"{name}: edges must be an (m, 2) integer array, got {E.shape} {E.dtype}")
+    E = E.astype(np.int64)
+    bad = np.flatnonzero((E < 0).any(axis=1) | (E >= len(V)).any(axis=1) | (E[:, 0] == E[:, 1]))
+    if len(bad):
+        raise InputError(f"{name}: edge {bad[0]} {E[bad[0]].tolist()} is a loop or out of range "
+                         f"({len(V)} vertices)")
+    key = np.minimum(E[:, 0], E[:, 1]) * len(V) + np.maximum(E[:, 0], E[:, 1])
+    if len(np.unique(key)) != len(key):
+        raise InputError(f"{name}: an edge is listed twice")
+    w = np.ascontiguousarray(weights, dtype=np.float64)
+    if w.shape != (len(E),) or not np.isfinite(w).all():
+        raise InputError(f"{name}: weights must be {len(E)} finite numbers, one per edge")
+    return V, E, w
+
+
+@dataclass(frozen=True, eq=False)
+class ARAPProblem:
+    """Immutable precomputation of one ARAP problem (libigl's ``ARAPData``).
+
+    Build with :meth:`from_mesh` or :meth:`from_graph`; do not call the constructor.
+
+    Attributes
+    ----------
+    graph : EdgeGraph
+        Rest shape and edges in internal numbering.
+    perm, iperm : (n,) int64
+        Internal -> caller and caller -> internal vertex numbers.
+    w : (m,) float64
+        Edge weights (by edge id).
+    weights_kind : str or None
+        Name of the weighting (None for caller-supplied weights).
+    energy : NeighbourhoodEnergy
+        The energy's precomputed structure (internal numbering).
+    handles : (h,) int64
+        Handle vertices, caller numbering.
+    fixed_extra : (f,) int64
+        Vertices of components without a handle, held at rest (caller numbering).
+    notes : list of str
+        What was done about the constraints.
+    """
+
+    graph: EdgeGraph
+    perm: np.ndarray
+    iperm: np.ndarray
+    w: np.ndarray
+    weights_kind: str | None
+    energy: NeighbourhoodEnergy
+    handles: np.ndarray
+    fixed_extra: np.ndarray
+    notes: list[str]
+    free_components: str = "follow"
+    caller_graph: EdgeGraph | None = field(default=None, repr=False)
+    timings: dict[str, float] = field(default_factory=dict, repr=False)
+    #: the power of two the positions are divided by inside (see :func:`unit_scale`)
+    scale: float = 1.0
+
+    # -- construction --------------------------------------------------------------
+    @classmethod
+    def from_mesh(cls, mesh: Mesh, handles, energy="rring", weights: str | None = None, *,
+                  rings=1, free_components: str = "follow", reorder: bool = True,
+                  **energy_options) -> ARAPProblem:
+        """Precompute ARAP on a triangle mesh.
+
+        Parameters
+        ----------
+        mesh : Mesh
+        handles : (h,) int
+            Constrained vertices.
+        energy : str
+            One of :data:`arapkit.arap.energies.base.ENERGIES` for the local/global solver.
+        weights : str, optional
+            Edge weighting (default :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`).
+        rings : int or (n,) int
+            r per vertex for ``energy="rring"``.
+        free_components, reorder :
+            As for :class:`arapkit.Deformer`.
+        **energy_options :
+            Options of the energy (e.g. ``sr_alpha``).
+
+        Examples
+        --------
+        >>> from arapkit.mesh.shapes import bar
+        >>> p = ARAPProblem.from_mesh(bar(), [0, 1], rings=2)
+        >>> p.n_vertices, p.energy.name
+        (1154, 'rring')
+        """
+        from ..mesh.weights import DEFAULT_WEIGHTS, edge_weights
+
+        t0 = time.perf_counter()
+        kind = DEFAULT_WEIGHTS if weights is None else weights
+        w = edge_weights(mesh, kind)
+        if not isinstance(kind, str):  # explicit per-edge weights: no kind to name
+            kind = None
+        return cls._build(EdgeGraph.from_mesh(mesh), w, kind, handles, energy, rings,
+                          free_components, reorder, energy_options, t0)
+
+    @classmethod
+    def from_graph(cls, vertices, edges, weights, handles, *, rings=1, name: str = "graph",
+                   free_components: str = "follow", reorder: bool = True) -> ARAPProblem:
+        """Precompute r-ring ARAP on a plain edge graph (e.g. a tetrahedral mesh's edges).
+
+        The energy is eq. (1) of Chen et al. 2017 on the given edges, which is defined on any
+        edge graph: ``sum_k sum_{e in N(k, r_k)} w_e |e' - R_k e|^2``.
+
+        Parameters
+        ----------
+        vertices : (n, 3) float
+            Rest positions.
+        edges : (m, 2) int
+            Undirected edges, each once (no loops).
+        weights : (m,) float
+            Weight of each edge (positive weights keep the rest shape an energy minimum).
+        handles : (h,) int
+            Constrained vertices.
+        rings : int or (n,) int
+            r per vertex.
+        name : str
+            Used in error messages.
+        free_components, reorder :
+            As for :class:`arapkit.Deformer`.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+        >>> E = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
+        >>> p = ARAPProblem.from_graph(V, E, np.ones(6), [0, 1, 2], name="tet")
+        >>> p.n_vertices, len(p.w)
+        (4, 6)
+        """
+        t0 = time.perf_counter()
+        V, E, w = _check_graph(vertices, edges, weights, name)
+        return cls._build(EdgeGraph(V, E, name), w, None, handles, "rring", rings,
+                          free_components, reorder, {}, t0)
+
+    @classmethod
+    def _build(cls, graph: EdgeGraph, w, kind, handles, energy, rings, free_components,
+               reorder, energy_options, t0) -> ARAPProblem:
+        from .energies.base import make_energy
+        from .rings import check_rings
+
+        n = graph.n_vertices
+        # the problem lives in units of a power of two near the extent: exact, and every
+        # tolerance inside becomes relative to the mesh's own size
+        s = unit_scale(graph.vertices, graph.name)
+        if s != 1.0:
+            graph = graph.scaled(1.0 / s)
+        perm = bandwidth_order(graph) if reorder and n > 1 else np.arange(n, dtype=np.int64)
+        iperm = np.empty(n, dtype=np.int64)
+        iperm[perm] = np.arange(n)
+        inner = graph.permuted(perm, iperm)
+        setup_ms = 1e3 * (time.perf_counter() - t0)
+        h, extra, notes = cls._constraints(graph, handles, free_components)
+        rings = check_rings(rings, n)
+        t1 = time.perf_counter()
+        en = make_energy(energy, inner, w, kind, rings=rings, perm=perm, **energy_options)
+        if not math.isfinite(en.rest_term * s * s):
+            raise InputError(
+                f"{graph.name}: coordinates too large for double precision (extent about "
+                f"{s:.3g}: the deformation energy overflows); rescale the mesh"
+            )
+        p = cls(inner, perm, iperm, w, kind, en, h, extra, notes, free_components, graph,
+                scale=s)
+        p.timings["neighbourhood_ms"] = setup_ms + 1e3 * (time.perf_counter() - t1)
+        return p
+
+    @staticmethod
+    def _constraints(graph: EdgeGraph, handles, policy: str):
+        h = check_handles(graph, handles)
+        extra, notes = anchor_components(graph, h, policy)
+        return h, extra, notes
+
+    def with_handles(self, handles) -> ARAPProblem:
+        """The same problem with a new handle set (refactorises on first use)."""
+        h, extra, notes = self._constraints(self.caller_graph, handles, self.free_components)
+        return replace(self, handles=h, fixed_extra=extra, notes=notes,
+                       timings={k: v for k, v in self.timings.items()
+                                if k != "factorisation_ms"})
+
+    def with_energy(self, energy: NeighbourhoodEnergy, build_ms: float = 0.0) -> ARAPProblem:
+        """The same graph and handles with another energy (e.g. a new rigidity map)."""
+        return replace(self, energy=energy, timings={"neighbourhood_ms": build_ms})
+
+    def with_rings(self, rings) -> ARAPProblem:
+        """The same r-ring problem with a new rigidity map (int or one r per vertex).
+
+        Examples
+        --------
+        >>> from arapkit.mesh.shapes import bar
+        >>> p = ARAPProblem.from_mesh(bar(), [0]).with_rings(3)
+        >>> int(p.energy.rings.max())
+        3
+        """
+        from .energies.base import make_energy
+        from .rings import check_rings
+
+        if self.energy.name != "rring":
+            raise InputError(f"energy '{self.energy.name}' has no rigidity map")
+        t0 = time.perf_counter()
+        r = check_rings(rings, self.n_vertices)
+        en = make_energy("rring", self.graph, self.w, self.weights_kind, rings=r,
+                         perm=self.perm)
+        return self.with_energy(en, 1e3 * (time.perf_counter() - t0))
+
+    # -- derived data ------------------------------------------------------------------
+    @property
+    def n_vertices(self) -> int:
+        """Number of vertices."""
+        return self.graph.n_vertices
+
+    @property
+    def name(self) -> str:
+        """The graph's name (for messages)."""
+        return self.graph.name
+
+    @property
+    def vertices(self) -> np.ndarray:
+        """Rest positions, internal numbering."""
+        return self.graph.vertices
+
+    @property
+    def edges(self) -> np.ndarray:
+        """Edges, internal numbering."""
+        return self.graph.edges
+
+    @cached_property
+    def constrained(self) -> np.ndarray:
+        """Handles then component anchors (caller numbering)."""
+        return np.concatenate([self.handles, self.fixed_extra])
+
+    @cached_property
+    def elimination(self) -> Elimination:
+        """Free/constrained split with the factor of the reduced system (built on first use)."""
+        t0 = time.perf_counter()
+        remedy = (
+            Advice(" (obtuse triangles give negative cotangent weights); use {weights}",
+                   weights=SOUND_WEIGHTS)
+            if (self.w < 0).any() else ""
+        )
+        el = Elimination.from_edges(self.n_vertices, self.edges, self.energy.system_w,
+                                    self.iperm[self.constrained], self.name, remedy)
+        self.timings["factorisation_ms"] = 1e3 * (time.perf_counter() - t0)
+        return el
+
+    @property
+    def factorised(self) -> bool:
+        """Whether the factor has been computed."""
+        return "elimination" in self.__dict__
+
+    def constrained_targets(self, targets: np.ndarray) -> np.ndarray:
+        """Positions of :attr:`constrained` for given handle targets (anchors at rest)."""
+        return np.concatenate([targets, self.caller_graph.vertices[self.fixed_extra]])
+
+    @cached_property
+    def backend(self):
+        """The CPU backend for this problem (kernels' scratch buffers; built on first use)."""
+        from .backends.cpu import CPUBackend
+
+        return CPUBackend(self).bind(self)
+
+    def solve(self, targets, init=None, *, tol: float = 1e-3, max_iter: int = 1000,
+              callback=None, accelerate: bool = False, history: int = 5):
+        """Solve for handle targets with the local/global loop on the CPU backend.
+
+        Parameters
+        ----------
+        targets : (h, 3)
+            Handle positions, in the order of :attr:`handles`.
+        init : (n, 3), optional
+            Start positions (caller numbering); default the rest shape with identity
+            rotations.
+        tol, max_iter, callback, accelerate, history :
+            As for :meth:`arapkit.Deformer.solve`.
+
+        Returns
+        -------
+        arapkit.arap.loop.Result
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+        >>> E = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
+        >>> p = ARAPProblem.from_graph(V, E, np.ones(6), [0, 1, 2])
+        >>> res = p.solve(V[:3] + 1.0)  # translate the handles: the tet follows rigidly
+        >>> bool(np.allclose(res.vertices, V + 1.0))
+        True
+        """
+        from .constraints import check_targets
+        from .loop import local_global
+
+        T = check_targets(self.handles, targets)
+        start = None
+        if init is not None:
+            start = np.asarray(init, dtype=np.float64)
+            if start.shape != (self.n_vertices, 3) or not np.isfinite(start).all():
+                raise InputError(f"init: expected finite positions of shape "
+                                 f"({self.n_vertices}, 3)")
+        return local_global(self, self.backend, T, start, tol=tol, max_iter=max_iter,
+                            callback=callback, accelerate=accelerate, history=history)
+
+    @cached_property
+    def b_rest(self) -> np.ndarray:
+        """``A P0``: the right-hand side for identity rotations (internal numbering)."""
+        E, dw, P0 = self.edges, self.energy.system_w, self.vertices
+        a, b = E[:, 0], E[:, 1]
+        n = self.n_vertices
+        out = np.zeros((n, 3))
+        dP = dw[:, None] * (P0[a] - P0[b])
+        for ax in range(3):
+            out[:, ax] = np.bincount(a, dP[:, ax], n) - np.bincount(b, dP[:, ax], n)
+        return out
