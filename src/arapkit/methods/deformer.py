@@ -44,12 +44,20 @@ from ..errors import Advice, InputError
 from ..mesh.model import Mesh
 from ..mesh.weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
 from ..validate import integer, iteration_cap, real_array, tolerance
+from .registry import INTERFACES, MethodInfo, register
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
            "bandwidth_order", "check_method", "unit_scale"]
 
 INITS = ("identity", "laplacian")
 DEVICES = ("cpu", "auto", "cuda", "cuda:N", "torch-cpu")
+
+register(MethodInfo("rring", "r-ring ARAP", local_global=True, descent=True, rigidity_map=True,
+                    accelerate=True, volumetric=True))
+register(MethodInfo("spokes-and-rims", "spokes-and-rims ARAP", local_global=True, descent=True,
+                    accelerate=True))
+register(MethodInfo("sr-arap", "SR-ARAP", local_global=True, descent=False,
+                    options=("sr_alpha",), interfaces=frozenset(INTERFACES) - {"torch"}))
 
 
 def _check_device(device: str) -> str:

@@ -36,11 +36,18 @@ from ..arap.constraints import CholeskyFactor, check_handles, check_targets
 from ..arap.loop import Result
 from ..errors import InputError
 from ..mesh.model import Mesh
+from .registry import MethodInfo, register
 
 __all__ = ["DEFAULT_NODES", "EmbeddedDeformation", "check_nodes", "sample_nodes"]
 
 #: default graph size (clamped to the number of vertices)
 DEFAULT_NODES = 200
+
+# Gauss-Newton with a step control that refuses a rising step: a descent method; handles are
+# soft (a weighted term), met to the tolerance the docs state
+register(MethodInfo("embedded", "embedded deformation", local_global=False, descent=True,
+                    exact_handles=False, options=("nodes",),
+                    interfaces=frozenset({"library", "cli", "compare", "batch", "editor"})))
 #: nearest nodes per vertex (the paper's k = 4)
 K_NEAREST = 4
 #: the paper's weights

@@ -19,8 +19,13 @@ from ..arap.constraints import Elimination, anchor_components, check_handles, ch
 from ..errors import InputError
 from ..mesh.model import Mesh
 from ..mesh.weights import DEFAULT_WEIGHTS, edge_weights, voronoi_areas
+from .registry import MethodInfo, register
 
 __all__ = ["LaplacianEditor", "laplacian_edit", "differential_operator"]
+
+# one linear solve, no iterations: offered by the library and the editor
+register(MethodInfo("laplacian", "Laplacian editing", local_global=False, descent=True,
+                    interfaces=frozenset({"library", "editor"})))
 
 
 def differential_operator(mesh: Mesh, weights: str = DEFAULT_WEIGHTS) -> sp.csr_matrix:
