@@ -111,7 +111,54 @@ def test_huge_targets_stop_the_solve_and_write_nothing(capsys, files, motion):
     (tmp / "far.json").write_text(json.dumps([{"indices": base}, {"indices": tip, **motion}]))
     line = cli_refuses(capsys, tmp, "deform", tmp / "bar.off", "--handles", tmp / "far.json",
                        "-o", tmp / "o.ply", "--report", tmp / "r.json")
-    assert "too large for double precision" in line and "bar.off" in line
+    # the handle file put the target there: it is named, with the group and vertex, not the mesh
+    assert f"far.json: handle group 2: target of vertex {tip[0]} reaches 1e+308" in line
+    assert "bar.off" not in line
+
+
+def test_huge_def_transform_names_the_def_file(capsys, files, mesh):
+    from arapkit.io.handles import save_def, save_sel
+
+    tmp, base, tip = files
+    save_sel(tmp / "a.sel", mesh.n_vertices, base, tip)
+    M = np.eye(4)
+    M[0, 3] = 1e300
+    save_def(tmp / "far.def", M)
+    line = cli_refuses(capsys, tmp, "deform", tmp / "bar.off", "--handles", tmp / "a.sel",
+                       "--transform", tmp / "far.def", "-o", tmp / "o.ply")
+    assert f"far.def: handle group 2 ('handle'): target of vertex {tip[0]} reaches 1e+300" in line
+    # an overflowing matrix product (inf targets) is caught by the same rule
+    M[0, 0] = 1e308
+    save_def(tmp / "far.def", M)
+    line = cli_refuses(capsys, tmp, "deform", tmp / "bar.off", "--handles", tmp / "a.sel",
+                       "--transform", tmp / "far.def", "-o", tmp / "o.ply")
+    assert "far.def: handle group 2 ('handle'): target of vertex" in line and "inf" in line
+
+
+def test_target_reach_is_the_mesh_number_range(tmp_path, mesh):
+    from arapkit.mesh.model import COORDINATE_RANGE
+
+    x = mesh.vertices[:, 0]
+    base = np.flatnonzero(x <= x.min() + 1e-9).tolist()
+    tip = np.flatnonzero(x >= x.max() - 1e-9).tolist()
+    p = tmp_path / "h.json"
+    # at the limit the targets load and the solve stays finite: the rule refuses nothing
+    # the solver can do (the bar is 7 units long, so the limit is 1e150 itself)
+    p.write_text(json.dumps([{"indices": base},
+                             {"indices": tip, "translate": [COORDINATE_RANGE, 0, 0]}]))
+    hs = load_handles(p, mesh.vertices)
+    res = Deformer(mesh, hs.indices).solve(hs.targets, max_iter=3)
+    assert np.isfinite(res.vertices).all()
+    p.write_text(json.dumps([{"indices": base},
+                             {"indices": tip, "translate": [2 * COORDINATE_RANGE, 0, 0]}]))
+    with pytest.raises(InputError, match=rf"h.json: handle group 2: target of vertex {tip[0]} "
+                                         r"reaches 2e\+150"):
+        load_handles(p, mesh.vertices)
+    # a tiny mesh: the limit is 1e150 of its extents (0.07 units long: 7e148)
+    small = mesh.vertices * 0.01
+    p.write_text(json.dumps([{"indices": base}, {"indices": tip, "translate": [1e149, 0, 0]}]))
+    with pytest.raises(InputError, match=r"at most 7e\+148"):
+        load_handles(p, small)
 
 
 def test_api_huge_targets_raise_not_nan(mesh):
@@ -587,13 +634,21 @@ def test_load_handles_huge_numbers(tmp_path, mesh):
                 load_handles(p, mesh.vertices)
 
 
-def test_sel_status_beyond_c_integer(tmp_path, mesh):
+def test_sel_status_other_than_0_1_2_is_refused(tmp_path, mesh):
     from arapkit.io.handles import load_sel
 
     p = tmp_path / "a.sel"
-    p.write_text("\n".join(["0"] + ["1" + "0" * 30] * (mesh.n_vertices - 2) + ["2"]))
-    hs = load_sel(p, mesh.vertices)  # huge statuses are "free", as any other code
-    assert hs.indices.tolist() == [0, mesh.n_vertices - 1]
+    statuses = ["0"] + ["1"] * (mesh.n_vertices - 2) + ["2"]
+    p.write_text("\n".join(statuses))
+    assert load_sel(p, mesh.vertices).indices.tolist() == [0, mesh.n_vertices - 1]
+    # any code other than 0, 1, 2 is refused with its line (a comment line counts as one)
+    for bad, shown in (("7", "7"), ("-1", "-1"), ("1" + "0" * 30, "1" + "0" * 30)):
+        lines = ["# statuses"] + statuses[:]
+        lines[5] = bad
+        p.write_text("\n".join(lines))
+        with pytest.raises(InputError) as e:
+            load_sel(p, mesh.vertices)
+        assert str(e.value) == f"{p}:6: status {shown} is not one of 0, 1, 2"
 
 
 def test_file_names_with_nul_bytes(mesh):
@@ -611,3 +666,104 @@ def test_rings_tokens_that_fool_isdigit(tmp_path, token):
     p.write_text(f"1\n{token}\n1\n", encoding="utf-8")
     with pytest.raises(InputError, match="is not an integer"):
         load_rings(p, 3)
+
+
+# ------------------------------------------------------------------ damaged and huge input files
+
+
+@pytest.mark.parametrize("garbage", [b"PK\x03\x04" + b"\x00garbage" * 20, b"PK\x03\x04"])
+def test_corrupt_npz_and_npy_are_one_line(capsys, files, mesh, garbage):
+    # zip's signature, then garbage: np.load hands the file to zipfile, which raises
+    # BadZipFile (not a ValueError); learn reported it as an internal error, exit 1
+    tmp, _, _ = files
+    (tmp / "seq.npz").write_bytes(garbage)
+    line = cli_refuses(capsys, tmp, "learn", tmp / "seq.npz", "-o", tmp / "r.txt")
+    assert line.startswith(f"arapkit: error: {tmp / 'seq.npz'}: not a readable .npz file (")
+    # a rings .npy that starts like an archive, through the same loader
+    (tmp / "r.npy").write_bytes(garbage)
+    line = cli_refuses(capsys, tmp, "deform", tmp / "bar.off", "--handles", tmp / "h.json",
+                       "--rings-file", tmp / "r.npy", "-o", tmp / "o.ply")
+    assert line.startswith(f"arapkit: error: {tmp / 'r.npy'}: not a readable .npy file (")
+
+
+def test_npz_member_damaged_after_a_good_directory(capsys, files, mesh):
+    # a real archive whose compressed member is overwritten: the directory reads, the
+    # member does not (zlib.error)
+    tmp, _, _ = files
+    p = tmp / "seq.npz"
+    np.savez_compressed(p, V=np.stack([mesh.vertices] * 3), F=mesh.faces)
+    raw = bytearray(p.read_bytes())
+    raw[200:2000] = b"\xff" * 1800
+    p.write_bytes(bytes(raw))
+    line = cli_refuses(capsys, tmp, "learn", p, "-o", tmp / "r.txt")
+    assert line.startswith(f"arapkit: error: {p}: not a readable .npz file (")
+
+
+def test_input_files_over_the_cap_are_refused_in_one_line(capsys, files, mesh, monkeypatch):
+    from arapkit.io.handles import save_def, save_sel
+    from arapkit.workflows.batch import load_jobs
+
+    tmp, base, tip = files
+    save_sel(tmp / "a.sel", mesh.n_vertices, base, tip)
+    save_def(tmp / "a.def", np.eye(4))
+    (tmp / "r.txt").write_text("1\n" * mesh.n_vertices)
+    sel = ["--handles", tmp / "a.sel", "--transform", tmp / "a.def"]
+    for at_fault, kind, args in [
+        ("h.json", "handle files", ["--handles", tmp / "h.json"]),
+        ("a.sel", ".sel files", sel),
+        ("a.def", ".def files", sel),
+        ("r.txt", "rings files", ["--handles", tmp / "h.json", "--rings-file", tmp / "r.txt"]),
+    ]:
+        size = (tmp / at_fault).stat().st_size
+        cap = (size - 1) / 2**20  # one byte short; the other inputs here are smaller
+        monkeypatch.setenv(validate.INPUT_CAP_VARIABLE, repr(cap))
+        line = cli_refuses(capsys, tmp, "deform", tmp / "bar.off", *args, "-o", tmp / "o.ply")
+        assert line == (f"arapkit: error: {tmp / at_fault}: {size / 2**20:.3g} MiB is more "
+                        f"than the {cap:g} MiB allowed for {kind} "
+                        "(set ARAPKIT_MAX_INPUT_MB to raise the cap)")
+    monkeypatch.setenv(validate.INPUT_CAP_VARIABLE, "0.001")
+    for reader, what in [(lambda p: EditorState.read_session(p), "sessions"),
+                         (lambda p: load_jobs(p), "job files")]:
+        with pytest.raises(InputError, match=f"MiB allowed for {what}"):
+            reader(tmp / "r.txt")
+    # the default cap and a bad override
+    monkeypatch.delenv(validate.INPUT_CAP_VARIABLE)
+    assert validate.input_cap_mb() == validate.MAX_INPUT_MB == 256
+    monkeypatch.setenv(validate.INPUT_CAP_VARIABLE, "lots")
+    with pytest.raises(InputError, match="ARAPKIT_MAX_INPUT_MB: expected a number"):
+        load_handles(tmp / "h.json", mesh.vertices)
+
+
+_PEAK = """
+import json, sys, tracemalloc
+import numpy as np
+from arapkit.errors import InputError
+from arapkit.io.handles import load_handles
+tracemalloc.start()
+try:
+    load_handles(sys.argv[1], np.eye(3))
+except InputError as e:
+    assert len(str(e)) < 400, len(str(e))
+print(tracemalloc.get_traced_memory()[1])
+"""
+
+
+@pytest.mark.parametrize("case", ["name", "duplicate name", "escapes"])
+def test_long_strings_in_handle_files_take_a_small_multiple_of_the_file(tmp_path, case):
+    # a 20 MB group name drove the peak to 100 times the file's size (the string scan of
+    # the nesting check); messages that quote the name must not copy it either
+    import subprocess
+    import sys
+
+    long = "x" * 20_000_000 if case != "escapes" else "\\\\\"" * 4_000_000
+    groups = [{"name": long, "indices": [0]}]
+    if case == "duplicate name":
+        groups.append({"name": long, "indices": [1]})
+    p = tmp_path / "h.json"
+    p.write_text(json.dumps(groups))
+    size = p.stat().st_size
+    env = {"PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src")}
+    out = subprocess.run([sys.executable, "-c", _PEAK, str(p)], capture_output=True, text=True,
+                         env=env, check=True)
+    peak = int(out.stdout)
+    assert peak < 4 * size, (peak / size, size)

@@ -423,3 +423,57 @@ def test_editor_worker_runs_each_method(method):
     ref = Deformer(m, h, energy=method).solve(t, tol=1e-9, max_iter=5000)
     assert np.abs(last.vertices - ref.vertices).max() < 1e-4 * m.bounding_box_diagonal
     assert last.vertex_energy is not None and last.vertex_energy.shape == (m.n_vertices,)
+
+
+def _rigid_bar_case():
+    m = bar(length=3.0, segments=(15, 2, 2))
+    th = 0.8
+    Q = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]])
+    x = m.vertices[:, 0]
+    return m, np.flatnonzero((x < 0.25) | (x > 2.75)), m.vertices @ Q.T + [1.0, 2.0, 3.0], Q
+
+
+def test_embedded_init_positions_are_honoured():
+    m, h, Vr, Q = _rigid_bar_case()
+    d = Deformer(m, h, energy="embedded", nodes=40)
+    # the rest shape is the identity start: the same run as no init
+    cold = d.solve(Vr[h], tol=1e-12, max_iter=100)
+    rest = d.solve(Vr[h], init=m.vertices, tol=1e-12, max_iter=100)
+    # (fitted to round-off: the 1e-12 stopping test may then end elsewhere)
+    assert np.allclose(rest.history[:3], cold.history[:3], rtol=1e-9)
+    assert np.abs(rest.vertices - cold.vertices).max() < 1e-9 * m.bounding_box_diagonal
+    assert cold.iterations > 1 and cold.history[0] > 1e-3  # a rotation is nonlinear
+    # the solution itself (a rigid image, representable exactly) as init: done at once
+    warm = d.solve(Vr[h], init=Vr, tol=1e-12, max_iter=100)
+    assert warm.history[0] < 1e-20  # from identity: cold.history[0] > 1e-3
+    assert np.abs(warm.vertices - Vr).max() < 1e-9 * m.bounding_box_diagonal
+    # the fitted maps are the rigid motion itself (not merely maps that skin to Vr)
+    A = d.embedded.fit_node_maps(Vr)[:, :9].reshape(-1, 3, 3)
+    assert np.abs(A - Q).max() < 1e-8
+
+
+def test_embedded_warm_start_and_laplacian_init():
+    from arapkit.methods.laplacian import LaplacianEditor
+
+    m = bar()
+    h, t = bar_bend(m, 90)
+    d = Deformer(m, h, energy="embedded", nodes=60)
+    cold = d.solve(t, tol=1e-8)
+    warm = d.solve(t, init=cold.vertices, tol=1e-8)
+    assert warm.history[0] < cold.history[0] / 2  # starts near the previous result
+    diag = m.bounding_box_diagonal
+    assert np.abs(warm.vertices - cold.vertices).max() < 1e-3 * diag
+    lap = Deformer(m, h, energy="embedded", nodes=60, init="laplacian").solve(t, tol=1e-8)
+    start = LaplacianEditor(m, h, "uniform").solve(t)
+    explicit = d.solve(t, init=start, tol=1e-8)
+    assert np.allclose(lap.history, explicit.history, rtol=1e-12)
+    assert abs(lap.history[0] - cold.history[0]) > 1e-3 * cold.history[0]
+
+
+def test_embedded_bad_init_is_one_line_error():
+    m = bar()
+    d = Deformer(m, [0, 1], energy="embedded", nodes=20)
+    for bad in (np.zeros((3, 3)), np.full(m.vertices.shape, np.nan)):
+        with pytest.raises(InputError, match=r"^init: expected finite positions") as e:
+            d.solve(m.vertices[[0, 1]], init=bad)
+        assert "\n" not in str(e.value)

@@ -4,8 +4,10 @@ What is run (keep to these rules when you add an example):
 
 1. Every ```python block runs, in README order, in one shared namespace (as one interpreter
    session), with the working directory set to a scratch folder holding a copy of
-   ``examples/``. Relative paths such as ``examples/cactus.off`` therefore work, and
-   outputs land in the scratch folder, never in the repository.
+   ``examples/`` and nothing beside it, as a fresh clone has. Relative paths such as
+   ``examples/cactus.off`` therefore work, ``../shared/data`` (the project's test data,
+   which a clone lacks) does not, and outputs land in the scratch folder, never in the
+   repository.
 2. In every other fenced block, except ```text and ```json, each line that starts with
    ``arapkit `` is run by bash in the same scratch folder, in README order (a line may use
    an earlier line's output), with ``arapkit`` being this checkout's command line. It must
@@ -14,10 +16,9 @@ What is run (keep to these rules when you add an example):
 3. ``arapkit edit`` starts a server that never exits: its lines are parsed by the real
    parser and the editor state is built (mesh, rings and handles loaded and checked), but
    nothing is served.
-4. Markers, in a comment: ``# needs ../shared/data`` on a line or in a python block skips
-   it when ``../shared/data`` is absent (a link to it sits next to the scratch folder, so
-   ``../shared/data`` works there too); ``# needs arapkit[torch]`` skips it when torch is
-   not installed (CI installs it); ``# not run`` on a line never runs it (say why after it).
+4. Markers, in a comment: ``# needs arapkit[torch]`` skips it when torch is not installed
+   (CI installs it); ``# not run`` on a line never runs it (say why after it). No example
+   may name ``../shared``: a reader's clone has nothing beside it.
    A line that pipes into a program that is not installed (``jq``) is skipped.
 5. ``<!-- same-as: PATH -->`` right before a ```json block: the block must equal the
    repository file PATH, compared as parsed JSON.
@@ -40,8 +41,6 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
-SHARED = ROOT.parent / "shared"
-NEEDS_DATA = "# needs ../shared/data"
 #: optional extras: a block or line with the marker skips when the module is missing
 NEEDS_EXTRA = {"# needs arapkit[torch]": ("torch", "torch"),
                "# needs arapkit[volume]": ("pytetwild", "volume")}
@@ -93,20 +92,13 @@ def examples(text: str) -> list[tuple[str, int, str]]:
     return out
 
 
-def _has_data() -> bool:
-    return (SHARED / "data").is_dir()
-
-
 @pytest.fixture(scope="module")
 def scratch(tmp_path_factory):
-    """A folder with a copy of examples/, a ../shared link and an ``arapkit`` on PATH."""
-    base = tmp_path_factory.mktemp("readme")
-    work = base / "repo"
+    """A folder with a copy of examples/ and nothing beside it, and an ``arapkit`` on PATH."""
+    work = tmp_path_factory.mktemp("readme") / "repo"
     shutil.copytree(ROOT / "examples", work / "examples")
-    if _has_data():
-        (base / "shared").symlink_to(SHARED, target_is_directory=True)
-    bin_dir = base / "bin"
-    bin_dir.mkdir()
+    assert [p.name for p in work.parent.iterdir()] == ["repo"]
+    bin_dir = tmp_path_factory.mktemp("bin")  # elsewhere: ../bin would be beside the copy
     shim = bin_dir / "arapkit"
     shim.write_text(f'#!/bin/sh\nexec "{sys.executable}" -m arapkit.cli "$@"\n')
     shim.chmod(0o755)
@@ -114,8 +106,6 @@ def scratch(tmp_path_factory):
 
 
 def _skip_reason(code: str) -> str | None:
-    if NEEDS_DATA in code and not _has_data():
-        return "needs ../shared/data, which is absent"
     for marker, (module, extra) in NEEDS_EXTRA.items():
         if marker in code and importlib.util.find_spec(module) is None:
             return f"needs {module} (pip install 'arapkit[{extra}]'), which is not installed"
@@ -167,6 +157,10 @@ def test_rules_find_the_examples():
     # none, the test below would pass vacuously
     assert kinds.count("python") >= 3 and kinds.count("shell") >= 10
     assert not any("armadillo" in code for _, _, code in found)
+    # the project's test data is not in a clone: an example using it fails for a reader
+    # (and is not skipped here: the scratch folder has nothing beside it either)
+    at_fault = [f"README.md:{line}" for _, line, code in found if "../shared" in code]
+    assert not at_fault, f"examples reading ../shared: {at_fault}"
 
 
 def test_rules_on_a_small_text():

@@ -84,5 +84,5 @@ _compat.install()
 
 
 def __getattr__(name: str):
-    # ``arapkit.solver`` after a plain ``import arapkit``: old flat paths, for one release
+    # ``arapkit.methods.deformer`` after a plain ``import arapkit``: old flat paths, for one release
     return _compat.old_module(name)

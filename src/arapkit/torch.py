@@ -148,6 +148,26 @@ def _pcg(apply_H, precond, g: _torch.Tensor, tol: float, max_iter: int):
     return mu, it
 
 
+#: why a method of :data:`arapkit.arap.energies.base.ENERGIES` is not offered by the layer
+_NOT_IN_LAYER = {
+    "sr-arap": "its rotation coupling has no per-step fixed point",
+    "embedded": "it is not a local/global energy",
+}
+
+
+def _check_layer_energy(energy: str) -> None:
+    """Refuse, in one line, a method the layer does not offer (see ``CAPABILITIES``)."""
+    from arapkit.arap.energies.base import ENERGIES, offered_by
+
+    if energy not in ENERGIES:
+        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(ENERGIES)})")
+    offered = offered_by("torch")
+    if energy not in offered:
+        why = _NOT_IN_LAYER.get(energy, "it is not offered by the layer")
+        raise InputError(f"energy '{energy}' is not available in ARAPLayer ({why}); use "
+                         f"{' or '.join(repr(e) for e in offered)}")
+
+
 class ARAPLayer(_torch.nn.Module):
     """Differentiable ARAP: handle targets in, deformed vertices out.
 
@@ -203,13 +223,7 @@ class ARAPLayer(_torch.nn.Module):
                  adjoint_max_iter: int = 1000) -> None:
         super().__init__()
         check_dtype(dtype)
-        if energy == "sr-arap":
-            raise InputError("energy 'sr-arap' is not available in ARAPLayer (its rotation "
-                             "coupling has no per-step fixed point); use 'rring' or "
-                             "'spokes-and-rims'")
-        if energy == "embedded":
-            raise InputError("energy 'embedded' is not a local/global energy; "
-                             "use 'rring' or 'spokes-and-rims'")
+        _check_layer_energy(energy)
         problem = ARAPProblem.from_mesh(mesh, handles, energy, weights, rings=rings)
         self.problem = problem
         self.system = TorchSystem(problem, device, dtype).bind(problem)

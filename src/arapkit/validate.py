@@ -24,6 +24,7 @@ from __future__ import annotations
 import json
 import math
 import numbers
+import os
 import re
 from collections.abc import Sequence
 from typing import Any
@@ -33,13 +34,17 @@ import numpy as np
 from arapkit.errors import InputError
 
 __all__ = [
+    "INPUT_CAP_VARIABLE",
+    "MAX_INPUT_MB",
     "MAX_ITER_LIMIT",
     "MAX_JSON_DEPTH",
     "MAX_RINGS",
     "MAX_UPLOAD_MB",
     "check_finite_positions",
+    "check_input_size",
     "handle_indices",
     "host",
+    "input_cap_mb",
     "integer",
     "iteration_cap",
     "json_depth",
@@ -47,6 +52,7 @@ __all__ = [
     "parse_json",
     "port",
     "quaternion",
+    "read_input",
     "real_array",
     "ring_size",
     "ring_sizes",
@@ -64,6 +70,11 @@ MAX_JSON_DEPTH = 64
 MAX_ITER_LIMIT = 10**9
 #: largest upload cap the editor accepts, in MiB (1 TiB: anything larger is a typo)
 MAX_UPLOAD_MB = 2.0**20
+#: largest handle, .sel/.def, rings, session or job file read, in MiB: a handle file with
+#: explicit targets for every vertex of a 2-million-vertex mesh is about 150 MiB
+MAX_INPUT_MB = 256.0
+#: environment variable that replaces :data:`MAX_INPUT_MB` (a number of MiB)
+INPUT_CAP_VARIABLE = "ARAPKIT_MAX_INPUT_MB"
 
 
 def _show(value: Any) -> str:
@@ -453,24 +464,119 @@ def upload_mb(value: Any, what: str = "--max-upload-mb") -> float:
     return number(value, what, lo=0.0, hi=MAX_UPLOAD_MB, lo_open=True)
 
 
-_JSON_STRING = re.compile(rb'"(?:[^"\\]|\\.)*"', re.S)
+def input_cap_mb() -> float:
+    """The size cap of :func:`read_input` in MiB: :data:`MAX_INPUT_MB`, or the value of
+    the environment variable :data:`INPUT_CAP_VARIABLE` when it is set.
+
+    Examples
+    --------
+    >>> input_cap_mb() == MAX_INPUT_MB or INPUT_CAP_VARIABLE in os.environ
+    True
+    """
+    text = os.environ.get(INPUT_CAP_VARIABLE)
+    if text is None:
+        return MAX_INPUT_MB
+    return number(text, INPUT_CAP_VARIABLE, lo=0.0, lo_open=True)
+
+
+def read_input(path: str | os.PathLike, what: str = "input files") -> bytes:
+    """The bytes of a small input file (handles, .sel/.def, rings, sessions, jobs), or a
+    one-line error naming it.
+
+    The size is checked before anything is read: these files are parsed into Python
+    objects, which take several times the file's size, so a file beyond the cap
+    (:func:`input_cap_mb`) is refused instead of exhausting memory.
+
+    Parameters
+    ----------
+    path : path
+    what : str
+        The kind of file, for the message ("handle files" ...).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "h.json"
+    >>> _ = p.write_text("[]")
+    >>> read_input(p)
+    b'[]'
+    >>> read_input(p.with_name("none.json"))
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: ...none.json: file not found
+    """
+    try:
+        with open(path, "rb") as f:
+            check_input_size(os.fstat(f.fileno()).st_size, path, what)
+            return f.read()
+    except InputError:
+        raise
+    except FileNotFoundError:
+        raise InputError(f"{path}: file not found") from None
+    except IsADirectoryError:
+        raise InputError(f"{path}: is a folder, expected a file") from None
+    except ValueError:  # the OS refuses names with a NUL byte
+        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)") from None
+    except OSError as e:
+        raise InputError(f"{path}: cannot read ({e.strerror or e})") from None
+
+
+def check_input_size(size: int, path: str | os.PathLike, what: str = "input files") -> None:
+    """Refuse ``size`` bytes of input file ``path`` when beyond :func:`input_cap_mb`.
+
+    Examples
+    --------
+    >>> check_input_size(2**40, "h.json", "handle files")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: h.json: 1.05e+06 MiB is more than the 256 MiB allowed for \
+handle files (set ARAPKIT_MAX_INPUT_MB to raise the cap)
+    """
+    cap = input_cap_mb()
+    if size > cap * 2**20:
+        raise InputError(
+            f"{path}: {size / 2**20:.3g} MiB is more than the {cap:g} MiB allowed "
+            f"for {what} (set {INPUT_CAP_VARIABLE} to raise the cap)"
+        )
+
+
+#: bytes scanned at a time by :func:`json_depth`: its working arrays stay this small
+_SCAN_CHUNK = 2**20
 
 
 def json_depth(text: str | bytes) -> int:
     """Deepest bracket nesting of a JSON text, found without recursion.
 
-    Strings are skipped, so brackets inside them do not count.
+    Strings are skipped, so brackets inside them do not count. The text is scanned in
+    chunks of :data:`_SCAN_CHUNK` bytes, so the scan needs little memory beyond the text
+    (a regular expression over the strings kept a backtracking record per character and
+    took over 100 times the text's size on one long string).
 
     Examples
     --------
     >>> json_depth('[{"a": "[[["}, [1]]')
     2
+    >>> json_depth(r'["\\\\", "\\"[[", [[]]]')
+    3
     """
     data = text.encode("utf-8", "surrogatepass") if isinstance(text, str) else bytes(text)
-    b = np.frombuffer(_JSON_STRING.sub(b'""', data), dtype=np.uint8)
-    step = (np.isin(b, (ord("["), ord("{"))).astype(np.int64)
-            - np.isin(b, (ord("]"), ord("}"))).astype(np.int64))
-    return int(np.cumsum(step).max(initial=0))
+    if b"\\" in data:
+        # escapes, left to right as a JSON reader takes them: first every escaped
+        # backslash, then every escaped quote; the quotes left open and close strings
+        data = data.replace(b"\\\\", b"__").replace(b'\\"', b"__")
+    inside, depth, deepest = 0, 0, 0
+    for start in range(0, len(data), _SCAN_CHUNK):
+        b = np.frombuffer(data, np.uint8, min(_SCAN_CHUNK, len(data) - start), start)
+        # quote parity so far, counted in uint8 (wrapping keeps the parity)
+        in_string = (np.cumsum(b == ord('"'), dtype=np.uint8) + inside) & 1
+        inside = int(in_string[-1])
+        opens = ((b == ord("[")) | (b == ord("{"))) & (in_string == 0)
+        closes = ((b == ord("]")) | (b == ord("}"))) & (in_string == 0)
+        step = opens.astype(np.int64) - closes
+        level = np.cumsum(step[opens | closes]) + depth
+        if len(level):
+            deepest, depth = max(deepest, int(level.max())), int(level[-1])
+    return deepest
 
 
 def parse_json(text: str | bytes, source: str, limit: int = MAX_JSON_DEPTH) -> Any:
@@ -485,14 +591,14 @@ def parse_json(text: str | bytes, source: str, limit: int = MAX_JSON_DEPTH) -> A
     ...
     arapkit.errors.InputError: h.json: JSON too deeply nested (100000 levels; at most 64)
     """
+    depth = json_depth(text)  # on the bytes when given bytes: no second copy of the text
+    if depth > limit:
+        raise InputError(f"{source}: JSON too deeply nested ({depth} levels; at most {limit})")
     if isinstance(text, bytes):
         try:
             text = text.decode("utf-8")
         except UnicodeDecodeError:
             raise InputError(f"{source}: not a UTF-8 text file") from None
-    depth = json_depth(text)
-    if depth > limit:
-        raise InputError(f"{source}: JSON too deeply nested ({depth} levels; at most {limit})")
     try:
         return json.loads(text)
     except json.JSONDecodeError as e:

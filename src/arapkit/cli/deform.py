@@ -163,12 +163,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def _check_method(args: argparse.Namespace) -> dict[str, Any]:
     """Fail fast on a bad method or option; the keyword arguments for the Deformer."""
+    from arapkit.arap.energies.base import CAPABILITIES
     from arapkit.methods.deformer import check_method
 
     options = check_method(args.energy, args.sr_alpha, args.nodes)
-    if args.energy != "rring" and (args.rings_file or args.rings != 1):
+    can = CAPABILITIES[args.energy]
+    if not can.rigidity_map and (args.rings_file or args.rings != 1):
         raise InputError(f"--energy {args.energy}: has no rigidity map (drop --rings/--rings-file)")
-    if args.energy not in ("rring", "spokes-and-rims") and args.accelerate:
+    if not can.accelerate and args.accelerate:
         raise InputError(f"--accelerate: not available with --energy {args.energy} "
                          "(only for the local/global descent methods)")
     args._method_options = options

@@ -170,7 +170,7 @@ def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit demo``; returns the exit status."""
     from arapkit.io.fileio import save_mesh, write_json
     from arapkit.mesh.shapes import bar, bar_bend, bar_two_materials
-    from arapkit.plots import figures as plots
+    from arapkit.plots.figures import figures as plots
 
     t_start = time.perf_counter()
     out = _prepare_out(args.out)

@@ -39,6 +39,7 @@ from arapkit.cli.common import (
     positive_int,
 )
 from arapkit.errors import InputError
+from arapkit.io.fileio import load_numpy
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 from arapkit.validate import real_array
 
@@ -187,16 +188,8 @@ def expand_frames(items: list[str]) -> list[str]:
 
 
 def _load_npz(path: str, alone: bool = True) -> Frames:
-    try:
-        with np.load(path, allow_pickle=False) as data:
-            if "V" not in data or "F" not in data:
-                raise InputError(f"{path}: expected arrays 'V' (frames x vertices x 3) and 'F' "
-                                 f"(triangles x 3), found {', '.join(data.files) or 'none'}")
-            V, F = np.asarray(data["V"]), np.asarray(data["F"])
-    except InputError:
-        raise
-    except (ValueError, OSError, EOFError) as e:
-        raise InputError(f"{path}: cannot read .npz ({type(e).__name__}: {e})") from None
+    arrays = load_numpy(path, ["V", "F"])
+    V, F = arrays["V"], arrays["F"]
     if V.ndim != 3 or V.shape[2] != 3:
         raise InputError(f"{path}: 'V' must have shape (frames, vertices, 3), got {V.shape}")
     if F.ndim != 2 or F.shape[1] != 3:

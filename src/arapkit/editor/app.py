@@ -37,6 +37,7 @@ import numpy as np
 import viser
 
 from arapkit import validate
+from arapkit.editor.state import METHODS as PANEL_METHODS
 from arapkit.editor.state import CameraView, EditorState, SolverSettings, raycast
 from arapkit.editor.views import (
     RING_COLORS,
@@ -54,9 +55,11 @@ from arapkit.errors import InputError
 
 TOOLS = ("Navigate", "Select: click", "Select: rectangle", "Paint brush", "Flood fill")
 VIEWS = ("Shaded", "Rigidity r", "Energy")
-METHODS = {"r-ring ARAP": "arap", "Laplacian editing": "laplacian",
-           "spokes-and-rims ARAP": "spokes-and-rims", "SR-ARAP": "sr-arap",
-           "embedded deformation": "embedded", "volumetric ARAP": "volumetric"}
+_METHOD_LABELS = {"arap": "r-ring ARAP", "laplacian": "Laplacian editing",
+                  "spokes-and-rims": "spokes-and-rims ARAP", "sr-arap": "SR-ARAP",
+                  "embedded": "embedded deformation", "volumetric": "volumetric ARAP"}
+#: dropdown label -> solver method, for every method of the solver panel
+METHODS = {_METHOD_LABELS.get(m, m): m for m in PANEL_METHODS}
 UP_AXES = {"+z": (0, 0, 1), "+y": (0, 1, 0), "+x": (1, 0, 0),
            "-z": (0, 0, -1), "-y": (0, -1, 0), "-x": (-1, 0, 0)}
 MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")

@@ -41,6 +41,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
 from arapkit import validate
+from arapkit.arap.energies.base import offered_by
 from arapkit.errors import InputError
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
@@ -48,7 +49,9 @@ SESSION_FORMAT = "arapkit-editor-session"
 SESSION_VERSION = 1
 #: solver-panel methods: "arap" is r-ring ARAP with the painted map, the others name
 #: :data:`arapkit.arap.energies.base.ENERGIES` (no rigidity map) or Laplacian editing
-METHODS = ("arap", "laplacian", "spokes-and-rims", "sr-arap", "embedded", "volumetric")
+#: (r-ring ARAP is "arap": it takes the painted map)
+METHODS = ("arap", "laplacian", *(e for e in offered_by("editor") if e != "rring"),
+           "volumetric")
 MAX_UNDO = 200
 
 
@@ -713,16 +716,11 @@ class EditorState:
     def read_session(path: str | os.PathLike[str]) -> dict[str, Any]:
         """Parse a session file, with a one-line error for a bad one."""
         try:
-            text = Path(path).read_bytes()
-        except OSError as exc:
-            raise InputError(f"{path}: cannot read session ({exc.strerror or exc})") from None
-        except ValueError:  # the OS refuses names with a NUL byte
-            raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)") from None
-        try:
-            d = validate.parse_json(text, str(path))
+            d = validate.parse_json(validate.read_input(path, "sessions"), str(path))
         except InputError as exc:
-            why = str(exc).removeprefix(f"{path}: ")
-            raise InputError(f"{path}: cannot read session ({why})") from None
+            shown = repr(str(path)) if "\0" in str(path) else str(path)  # never print a NUL
+            why = str(exc).removeprefix(f"{shown}: ")
+            raise InputError(f"{shown}: cannot read session ({why})") from None
         if not isinstance(d, dict):
             raise InputError(f"{path}: a session must be a JSON object")
         return d

@@ -1,4 +1,4 @@
-"""Writing meshes, reports and other outputs safely.
+"""Writing meshes, reports and other outputs safely; reading numpy array files.
 
 Every writer here is atomic: it writes a temporary file in the destination folder and
 then ``os.replace``-s it over the target, so a crash or Ctrl-C never leaves a half-written
@@ -29,6 +29,8 @@ import json
 import math
 import os
 import tempfile
+import zipfile
+import zlib
 from collections.abc import Iterator, Mapping, Sequence
 from pathlib import Path
 from typing import IO, Any
@@ -44,6 +46,7 @@ __all__ = [
     "FIGURE_FORMATS",
     "check_figure_format",
     "check_output_path",
+    "load_numpy",
     "mesh_format",
     "read_ply_vertex_properties",
     "save_mesh",
@@ -468,3 +471,66 @@ def read_ply_vertex_properties(path: str | os.PathLike) -> dict[str, np.ndarray]
         raise InputError(f"{path}: PLY file has no vertex element")
     cols = {name: np.asarray(data[name]) for name in names}
     return {name: a.reshape(-1) for name, a in cols.items() if a.ndim == 1 or a.shape[1:] == (1,)}
+
+
+# --------------------------------------------------------------------------- numpy arrays
+
+
+#: what np.load raises on a damaged or foreign file: a file that starts like a zip archive
+#: (every .npz) and then holds garbage fails inside zipfile or zlib, not in numpy
+_NUMPY_ERRORS = (ValueError, OSError, EOFError, KeyError, zipfile.BadZipFile, zlib.error)
+
+
+def load_numpy(
+    path: str | os.PathLike, names: Sequence[str] | None = None
+) -> np.ndarray | dict[str, np.ndarray]:
+    """Read a ``.npy`` array, or the arrays ``names`` of a ``.npz`` archive, from user input.
+
+    Every way a damaged file fails becomes one :class:`InputError` line naming the file;
+    pickled objects are never loaded.
+
+    Parameters
+    ----------
+    path : path
+    names : sequence of str, optional
+        For a ``.npz`` archive: the arrays to read (all must be present). Without it the
+        file must be a single ``.npy`` array.
+
+    Returns
+    -------
+    ndarray, or dict of name -> ndarray when ``names`` is given.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.npz"
+    >>> np.savez(p, V=np.zeros((2, 3)))
+    >>> load_numpy(p, ["V"])["V"].shape
+    (2, 3)
+    >>> _ = p.write_bytes(b"PK\\x03\\x04garbage")
+    >>> load_numpy(p, ["V"])
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: ...a.npz: not a readable .npz file (BadZipFile: File is not a \
+zip file)
+    """
+    kind = ".npy" if names is None else ".npz"
+    try:
+        with contextlib.ExitStack() as stack:
+            data = np.load(path, allow_pickle=False)
+            if isinstance(data, np.lib.npyio.NpzFile):
+                stack.enter_context(data)
+                if names is None:
+                    raise InputError(f"{path}: a .npz archive, expected a single .npy array")
+                missing = [n for n in names if n not in data.files]
+                if missing:
+                    raise InputError(f"{path}: expected arrays {', '.join(map(repr, names))}, "
+                                     f"found {', '.join(data.files) or 'none'}")
+                return {n: np.asarray(data[n]) for n in names}
+            if names is not None or not isinstance(data, np.ndarray):
+                raise InputError(f"{path}: not a .npz archive (a single array)")
+            return data
+    except FileNotFoundError:
+        raise InputError(f"{path}: file not found") from None
+    except _NUMPY_ERRORS as e:
+        raise InputError(f"{path}: not a readable {kind} file ({type(e).__name__}: {e})") from None

@@ -7,7 +7,7 @@ Three handle sources are understood, all resolved against the rest vertex positi
   ``fixed`` (the default), ``translate``, ``rotate`` (then optional ``translate``) or
   ``targets``. The schema is documented in the README (section "Handle files").
 * **Botsch–Sorkine / CGAL benchmark** (``*.sel`` + ``*.def``): one status per vertex
-  (0 fixed, 2 handle, anything else free) and a 4x4 matrix applied to the handle vertices.
+  (0 fixed, 1 free, 2 handle; nothing else) and a 4x4 matrix applied to the handle vertices.
 * **Rigidity maps** (``load_rings``): one integer r >= 1 per vertex, as plain text, ``.npy``
   or a PLY vertex property named ``rings``.
 
@@ -27,11 +27,12 @@ Examples
 
 from __future__ import annotations
 
+import io
 import json
 import math
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,7 +40,8 @@ from typing import Any
 import numpy as np
 
 from arapkit.errors import InputError
-from arapkit.validate import parse_json, ring_sizes
+from arapkit.mesh.model import COORDINATE_RANGE
+from arapkit.validate import check_input_size, parse_json, read_input, ring_sizes
 
 __all__ = [
     "HandleGroup",
@@ -236,8 +238,17 @@ class _Where:
         self.source, self.number, self.name = source, number, name
 
     def __call__(self, msg: str) -> InputError:
-        label = f"group {self.number}" + (f" ({self.name!r})" if self.name else "")
-        return InputError(f"{self.source}: handle {label}: {msg}")
+        return InputError(f"{self.source}: handle {self.label}: {msg}")
+
+    @property
+    def label(self) -> str:
+        """``group N ('name')``, the name cut short: a message is one readable line."""
+        return f"group {self.number}" + (f" ({_short(self.name)})" if self.name else "")
+
+
+def _short(name: str) -> str:
+    """``repr`` of a name, shortened to about 60 characters."""
+    return repr(name) if len(name) <= 60 else repr(name[:57]) + "..."
 
 
 def _is_number(x: Any) -> bool:
@@ -364,6 +375,26 @@ def _move(group: dict, rest: np.ndarray, err: _Where) -> tuple[np.ndarray, str]:
     return out, "moved"
 
 
+def _check_reach(targets: np.ndarray, idx: np.ndarray, V: np.ndarray, err: Any) -> None:
+    """Refuse targets outside the number range the solver computes in for this mesh.
+
+    The solver works in units of the mesh's extent and squares coordinates, so a target
+    must be within ``COORDINATE_RANGE`` both in size and in mesh extents (the rule
+    :func:`arapkit.mesh.model.check_number_range` applies to the mesh itself). Checked here,
+    the message names the file and group that put it there, not the mesh.
+    """
+    extent = float(np.max(V.max(axis=0) * 0.5 - V.min(axis=0) * 0.5)) * 2.0 if len(V) else 0.0
+    limit = COORDINATE_RANGE * min(1.0, extent) if extent > 0 else COORDINATE_RANGE
+    far = np.abs(targets).max(axis=1) > limit
+    if far.any():
+        i = int(np.argmax(far))
+        raise err(
+            f"target of vertex {int(idx[i])} reaches {float(np.abs(targets[i]).max()):.3g}, "
+            f"beyond the number range of this mesh (at most {limit:.3g}: coordinates up to "
+            f"{COORDINATE_RANGE:.0e} and {COORDINATE_RANGE:.0e} mesh extents of {extent:.3g})"
+        )
+
+
 def _group_list(data: Any, source: str) -> list:
     if isinstance(data, dict):
         unknown = sorted(set(data) - {"groups", COMMENT_KEY})
@@ -425,7 +456,7 @@ def parse_handles(data: Any, vertices: np.ndarray, source: str = "<handles>") ->
             raise err("'name' must be a non-empty string")
         name = name or f"group {number}"
         if name in names:
-            raise err(f"name {name!r} already used by group {names[name]}")
+            raise err(f"name {_short(name)} already used by group {names[name]}")
         names[name] = number
         idx = _select(g, V, err)
         taken = owner[idx] >= 0
@@ -433,28 +464,24 @@ def parse_handles(data: Any, vertices: np.ndarray, source: str = "<handles>") ->
             first = int(idx[np.argmax(taken)])
             other = groups[owner[first]].name
             raise err(
-                f"overlaps group {other!r}: both select vertex {first} "
+                f"overlaps group {_short(other)}: both select vertex {first} "
                 f"({int(taken.sum())} shared vertices)"
             )
         owner[idx] = len(groups)
         targets, kind = _move(g, V[idx], err)
         if not np.isfinite(targets).all():
             raise err("the motion puts targets beyond double precision (too large to represent)")
+        _check_reach(targets, idx, V, err)
         groups.append(HandleGroup(name, idx, targets, kind))
     return HandleSet(groups, source=source)
 
 
-def _read_text(path: Path) -> str:
+def _read_text(path: Path, what: str) -> str:
+    """A capped text input file (:func:`arapkit.validate.read_input`), decoded."""
     try:
-        return path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a folder, expected a file") from None
+        return read_input(path, what).decode("utf-8")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text file") from None
-    except ValueError:  # the OS refuses names with a NUL byte
-        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)") from None
 
 
 def load_handles(
@@ -489,10 +516,10 @@ def load_handles(
             transform = path.with_suffix(".def")
             if not transform.exists():
                 raise InputError(f"{path}: a .sel file needs a .def transform (--transform FILE)")
-        return load_sel(path, vertices, load_def(transform))
+        return load_sel(path, vertices, load_def(transform), transform)
     if transform is not None:
         raise InputError(f"{transform}: a .def transform only applies to .sel handle files")
-    data = parse_json(_read_text(path), str(path))
+    data = parse_json(read_input(path, "handle files"), str(path))
     return parse_handles(data, vertices, source=str(path))
 
 
@@ -542,27 +569,38 @@ def save_handles(path: str | os.PathLike, handles: HandleSet) -> None:
 _INTEGER = re.compile(r"[+-]?[0-9]+")
 
 
-def _tokens(path: Path) -> list[str]:
-    """Whitespace-separated tokens of a text file, skipping ``#`` comment lines."""
-    out: list[str] = []
-    for line in _read_text(path).splitlines():
-        line = line.split("#", 1)[0]
-        out.extend(line.split())
-    return out
+def _tokens(path: Path, what: str) -> Iterator[tuple[int, str]]:
+    """(line number, token) for the whitespace-separated tokens of a text file, skipping
+    ``#`` comments; lines are read one at a time, so a long file is never split at once."""
+    for number, line in enumerate(io.StringIO(_read_text(path, what)), start=1):
+        for token in line.split("#", 1)[0].split():
+            yield number, token
 
 
-def _int_tokens(path: Path, what: str) -> list[int]:
+def _int_tokens(path: Path, what: str, kind: str, expected: int | None = None,
+                allowed: range | None = None) -> list[int]:
     """The whitespace-separated integers of a text file (Python ints: no size limit).
 
-    A token that is not an integer names itself; ranges are the caller's rule.
+    A token that is not an integer, or outside ``allowed``, is named with its line.
+    With ``expected``, reading stops at the first token beyond that count. ``kind`` names
+    the kind of file for the size cap's message.
     """
-    toks = _tokens(path)
-    # ASCII digits with one optional sign: "--1" and "²" pass str.isdigit but not int()
-    bad = next((t for t in toks if not _INTEGER.fullmatch(t) or len(t) > 4000), None)
-    if bad is not None:
-        shown = bad if len(bad) <= 40 else bad[:37] + "..."
-        raise InputError(f"{path}: {what} {shown!r} is not an integer")
-    return [int(t) for t in toks]
+    out: list[int] = []
+    for number, t in _tokens(path, kind):
+        # ASCII digits with one optional sign: "--1" and "²" pass str.isdigit but not int()
+        if not _INTEGER.fullmatch(t) or len(t) > 4000:
+            shown = t if len(t) <= 40 else t[:37] + "..."
+            raise InputError(f"{path}:{number}: {what} {shown!r} is not an integer")
+        value = int(t)
+        if allowed is not None and value not in allowed:
+            shown = t if len(t) <= 40 else t[:37] + "..."
+            raise InputError(f"{path}:{number}: {what} {shown} is not one of "
+                             f"{', '.join(map(str, allowed))}")
+        out.append(value)
+        if expected is not None and len(out) > expected:
+            raise InputError(f"{path}:{number}: more than {expected} {what}s for a mesh of "
+                             f"{expected} vertices")
+    return out
 
 
 def load_def(path: str | os.PathLike) -> np.ndarray:
@@ -577,13 +615,13 @@ def load_def(path: str | os.PathLike) -> np.ndarray:
     5.0
     """
     path = Path(path)
-    toks = _tokens(path)
+    toks = [t for _, t in _tokens(path, ".def files")]
     try:
-        vals = [float(t) for t in toks]
+        vals = [float(t) for t in toks[:17]]
     except ValueError:
         raise InputError(f"{path}: expected 16 numbers (a 4x4 matrix)") from None
     if len(vals) != 16 or not all(math.isfinite(v) for v in vals):
-        raise InputError(f"{path}: expected 16 finite numbers (a 4x4 matrix), got {len(vals)}")
+        raise InputError(f"{path}: expected 16 finite numbers (a 4x4 matrix), got {len(toks)}")
     M = np.asarray(vals).reshape(4, 4)
     if not np.allclose(M[3], [0, 0, 0, 1], atol=1e-9):
         raise InputError(f"{path}: last row must be 0 0 0 1 (an affine transform)")
@@ -591,9 +629,12 @@ def load_def(path: str | os.PathLike) -> np.ndarray:
 
 
 def load_sel(
-    path: str | os.PathLike, vertices: np.ndarray, matrix: np.ndarray | None = None
+    path: str | os.PathLike,
+    vertices: np.ndarray,
+    matrix: np.ndarray | None = None,
+    matrix_source: str | os.PathLike | None = None,
 ) -> HandleSet:
-    """Read a ``.sel`` status file (0 fixed, 2 handle, anything else free).
+    """Read a ``.sel`` status file (0 fixed, 1 free, 2 handle).
 
     Parameters
     ----------
@@ -603,6 +644,9 @@ def load_sel(
         Rest positions.
     matrix : (4, 4) array_like, optional
         Affine transform of the handle (status 2) vertices; identity when omitted.
+    matrix_source : path, optional
+        The ``.def`` file ``matrix`` came from, named when it moves a handle out of the
+        number range (the ``.sel`` file is named otherwise).
 
     Returns
     -------
@@ -621,9 +665,8 @@ def load_sel(
     """
     path = Path(path)
     V = np.asarray(vertices, dtype=np.float64)
-    # statuses are small codes: anything else is "free", clipping keeps int64 safe
-    status = np.clip(np.array([max(min(t, 9), -9) for t in _int_tokens(path, "status")],
-                              dtype=np.int64), -9, 9)
+    # any other code is a typo or another format: refused, not silently "free"
+    status = np.array(_int_tokens(path, "status", ".sel files", len(V), range(3)), dtype=np.int8)
     if len(status) != len(V):
         raise InputError(f"{path}: {len(status)} vertex statuses for a mesh of {len(V)} vertices")
     fixed, moved = np.flatnonzero(status == 0), np.flatnonzero(status == 2)
@@ -634,7 +677,10 @@ def load_sel(
     if fixed.size:
         groups.append(HandleGroup("fixed", fixed, V[fixed].copy(), "fixed"))
     if moved.size:
-        tgt = V[moved] @ M[:3, :3].T + M[:3, 3]
+        with np.errstate(over="ignore", invalid="ignore"):  # checked just below
+            tgt = V[moved] @ M[:3, :3].T + M[:3, 3]
+        err = _Where(str(matrix_source or path), len(groups) + 1, "handle")
+        _check_reach(tgt, moved, V, err)
         groups.append(HandleGroup("handle", moved, tgt, "moved"))
     return HandleSet(groups, source=str(path))
 
@@ -733,14 +779,14 @@ def load_rings(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
     if not path.exists():
         raise InputError(f"{path}: file not found")
     if name.endswith(".npy"):
-        try:
-            values = np.load(path, allow_pickle=False)
-        except (ValueError, OSError, EOFError) as e:
-            raise InputError(f"{path}: not a readable .npy array ({e})") from None
+        from arapkit.io.fileio import load_numpy
+
+        check_input_size(path.stat().st_size, path, "rings files")
+        values = load_numpy(path)
     elif name.endswith((".ply", ".ply.gz")):
         values = _rings_from_ply(path)
     else:
-        values = _int_tokens(path, "rigidity value")
+        values = _int_tokens(path, "rigidity value", "rings files", int(n_vertices))
     return _validate_rings(values, int(n_vertices), path)
 
 

@@ -2,7 +2,7 @@
 
 Examples
 --------
->>> from arapkit.mesh import Mesh
+>>> from arapkit.mesh.model import Mesh
 >>> Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]).n_vertices
 3
 """

@@ -36,7 +36,7 @@ import numpy as np
 
 from ..arap.backends.cpu import CPUBackend
 from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
-from ..arap.energies.base import ENERGIES, LOCAL_GLOBAL
+from ..arap.energies.base import CAPABILITIES, ENERGIES, LOCAL_GLOBAL
 from ..arap.loop import Result, local_global
 from ..arap.problem import ARAPProblem, bandwidth_order, unit_scale
 from ..arap.rings import Neighbourhoods
@@ -212,9 +212,11 @@ class Deformer:
             return super().__new__(cls)
         from .volumetric import DEFAULT_DENSITY, VolumetricDeformer
 
-        if options.get("energy", "rring") != "rring":
-            raise InputError(f"volumetric=True runs r-ring ARAP; energy "
-                             f"'{options['energy']}' is for surfaces")
+        energy = options.get("energy", "rring")
+        check_method(energy, options.get("sr_alpha"), options.get("nodes"))
+        if not CAPABILITIES[energy].volumetric:
+            raise InputError(f"volumetric=True runs r-ring ARAP; energy '{energy}' is for "
+                             "surfaces")
         for key in ("energy", "sr_alpha", "nodes"):
             options.pop(key, None)
         return VolumetricDeformer(mesh, handles, rings,
@@ -253,7 +255,7 @@ class Deformer:
             raise InputError(f"unknown init '{init}' (use {' or '.join(INITS)})")
         self.init = init
         self.accelerate = bool(accelerate)
-        if self.accelerate and energy not in ("rring", "spokes-and-rims"):
+        if self.accelerate and not CAPABILITIES[energy].accelerate:
             raise InputError(f"accelerate: Anderson acceleration is for the local/global "
                              f"descent methods; energy '{energy}' is not one "
                              "(use accelerate=False)")
@@ -281,18 +283,18 @@ class Deformer:
     # -- configuration (lazy refactorisation, as CGAL) -----------------------------
     def set_handles(self, handles) -> None:
         """Use a new handle set; the factorisation is redone at the next solve."""
+        self._laplacian_editor = None
         if self.embedded is not None:
             from .embedded import EmbeddedDeformation
 
             self.embedded = EmbeddedDeformation(self.mesh, handles, len(self.embedded.nodes))
             return
         self.problem = self.problem.with_handles(handles)
-        self._laplacian_editor = None
 
     def set_rings(self, rings) -> None:
         """Use a new rigidity map (int or per-vertex); rebuilds neighbourhoods and the factor."""
         p = self.problem
-        if self.energy != "rring":
+        if not CAPABILITIES[self.energy].rigidity_map:
             if not np.all(np.asarray(rings) == 1):
                 raise InputError(f"energy '{self.energy}' has no rigidity map (rings must be 1)")
             return
@@ -329,7 +331,9 @@ class Deformer:
     def energy_is_sum_of_squares(self) -> bool:
         """Whether every weight is >= 0, so that the energy is a sum of squares (E >= 0).
 
-        False only for raw cotangent weights on meshes with obtuse triangles.
+        False only for raw cotangent weights on meshes with obtuse triangles. Embedded
+        deformation has no edge weights: its energy is a sum of squared residuals by
+        construction.
 
         Examples
         --------
@@ -337,6 +341,8 @@ class Deformer:
         >>> Deformer(bar(), [0]).energy_is_sum_of_squares
         True
         """
+        if self.problem is None:
+            return True
         return bool((self.w >= 0).all())
 
     @property
@@ -448,12 +454,15 @@ class Deformer:
             raise InputError(f"unknown init '{mode}' (use {' or '.join(INITS)})")
         if mode == "identity":
             return None
+        # embedded deformation has no problem: its constrained vertices are the handles
+        p = self.problem
         if self._laplacian_editor is None:
             from .laplacian import LaplacianEditor
 
-            self._laplacian_editor = LaplacianEditor(self.mesh, self.problem.constrained,
-                                                     "uniform")
-        return self._laplacian_editor.solve(self.problem.constrained_targets(targets))
+            self._laplacian_editor = LaplacianEditor(
+                self.mesh, self.handles if p is None else p.constrained, "uniform")
+        return self._laplacian_editor.solve(targets if p is None else
+                                            p.constrained_targets(targets))
 
     # -- the solve ----------------------------------------------------------------
     def solve(
@@ -486,11 +495,13 @@ class Deformer:
         tol = self.tol if tol is None else tolerance(tol)
         max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
         accelerate = self.accelerate if accelerate is None else bool(accelerate)
-        if accelerate and self.energy not in ("rring", "spokes-and-rims"):
+        if accelerate and not CAPABILITIES[self.energy].accelerate:
             raise InputError(f"accelerate: Anderson acceleration is for the local/global "
                              f"descent methods; energy '{self.energy}' is not one")
         if self.embedded is not None:
-            return self.embedded.solve(T, tol=tol, max_iter=max_iter, callback=callback)
+            # a start shape becomes node maps fitted to it (EmbeddedDeformation.fit_node_maps)
+            return self.embedded.solve(T, init=self._initial_positions(T, init), tol=tol,
+                                       max_iter=max_iter, callback=callback)
         self.prepare()
         start = self._initial_positions(T, init)
         return local_global(self.problem, self.backend, T, start, tol=tol, max_iter=max_iter,

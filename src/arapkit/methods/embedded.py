@@ -27,6 +27,7 @@ Handles are met to the soft-constraint residual (reported as ``max_handle_error`
 
 from __future__ import annotations
 
+import copy
 import time
 
 import numpy as np
@@ -274,22 +275,66 @@ class EmbeddedDeformation:
                 np.einsum("nab,nb->na", A, V - G[j]) + G[j] + X[j, 9:])
         return out * self.unit
 
+    def fit_node_maps(self, positions) -> np.ndarray:
+        """Node maps X (m, 12) that put every vertex at ``positions``, as the method would.
+
+        Positions alone leave the maps underdetermined (a node's vertices may lie on a
+        surface patch), so the fit minimises the method's own energy with every vertex a
+        soft handle at its position: ``w_rot E_rot + w_reg E_reg + w_con sum_v |v' -
+        p_v|^2``, by the same Gauss-Newton solve from identity maps. A rigid image of the
+        rest shape gives that rigid motion's maps (energy 0), the rest shape the identity;
+        the shape this object last produced gives back its maps unchanged.
+
+        Examples
+        --------
+        >>> from arapkit.mesh.shapes import bar
+        >>> m = bar(length=2.0, segments=(8, 2, 2))
+        >>> ed = EmbeddedDeformation(m, [0], nodes=10)
+        >>> X = ed.fit_node_maps(m.vertices + [0.0, 1.0, 0.0])
+        >>> bool(np.abs(ed.deformed(X) - (m.vertices + [0.0, 1.0, 0.0])).max() < 1e-9)
+        True
+        """
+        P = np.asarray(positions, dtype=np.float64)
+        if P.shape != self.mesh.vertices.shape or not np.isfinite(P).all():
+            raise InputError(f"init: expected finite positions of shape "
+                             f"{self.mesh.vertices.shape} (or node maps of shape "
+                             f"({len(self.nodes)}, 12))")
+        last = getattr(self, "node_maps", None)
+        if last is not None and np.array_equal(self.deformed(last), P):
+            return last.copy()  # a warm start from the previous result: its own maps
+        fit = copy.copy(self)  # same graph and skinning, every vertex a handle
+        fit.handles = np.arange(self.mesh.n_vertices)
+        fit._J_lin = None
+        fit.solve(P)
+        return fit.node_maps
+
+    def _start(self, init) -> np.ndarray:
+        """Node maps to start from: identity, given node maps, or fitted to positions."""
+        m = len(self.nodes)
+        if init is None:
+            X = np.zeros((m, 12))
+            X[:, :9] = np.eye(3).ravel()
+            return X
+        X = np.asarray(init, dtype=np.float64)
+        if X.shape == (m, 12) and np.isfinite(X).all():
+            return X.copy()
+        return self.fit_node_maps(X)
+
     def solve(self, targets, init=None, tol: float | None = None, max_iter: int | None = None,
               callback=None, accelerate=None) -> Result:
         """Deform so that the handles approach ``targets`` (soft constraints, weight 100).
 
-        ``init`` may be a previous :class:`Result` of this object's ``node_maps`` or None.
-        ``accelerate`` is accepted for interface compatibility and ignored.
+        ``init`` is None (identity maps), node maps (m, 12) such as a previous solve's
+        ``node_maps``, or vertex positions (n, 3), e.g. a previous result: the node maps
+        are then fitted to them (:meth:`fit_node_maps`). ``accelerate`` is accepted for
+        interface compatibility and ignored.
         """
         t_start = time.perf_counter()
         T = check_targets(self.handles, targets)
         tol = self.tol if tol is None else float(tol)
         max_iter = self.max_iter if max_iter is None else int(max_iter)
         m = len(self.nodes)
-        X = np.zeros((m, 12))
-        X[:, :9] = np.eye(3).ravel()
-        if isinstance(init, np.ndarray) and init.shape == (m, 12):
-            X = init.copy()
+        X = self._start(init)
         J_lin = self._linear_jacobian()
         c_lin = self._linear_rhs(T)
         JtJ_lin = (J_lin.T @ J_lin).tocsr()

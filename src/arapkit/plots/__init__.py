@@ -2,7 +2,7 @@
 
 The figures live in :mod:`arapkit.plots.figures`; importing this package loads no plotting
 library, so ``arapkit.plots.colors`` (shared with the editor) stays light. The figure
-functions are reached here lazily, for code written against the old ``arapkit.plots``.
+functions are reached here lazily, for code written against the old ``arapkit.plots.figures``.
 """
 
 from __future__ import annotations

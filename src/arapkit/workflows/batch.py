@@ -54,6 +54,7 @@ import numpy as np
 from ..errors import InputError, worded_for
 from ..mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 from ..methods.deformer import check_method
+from ..validate import read_input
 from .jobs import DEFAULT_ENERGY, ENERGIES, DeformJob
 
 __all__ = [
@@ -283,11 +284,7 @@ enclosed in double quotes at column 2)
     """
     path = Path(path)
     try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise InputError(f"{path}: file not found") from None
-    except IsADirectoryError:
-        raise InputError(f"{path}: is a folder, expected a JSON Lines job file") from None
+        text = read_input(path, "job files").decode("utf-8")
     except UnicodeDecodeError:
         raise InputError(f"{path}: not a text file") from None
     base = path.resolve().parent
@@ -379,8 +376,12 @@ def _deform_command(job: dict, output: str) -> list[str]:
         cmd += ["--rings-file", job["rings_file"]]
     else:
         cmd += ["--rings", str(job["rings"])]
-    cmd += ["--weights", job["weights"], "--tol", repr(job["tol"]), "--max-iter",
-            str(job["max_iter"]), "--init", job["init"]]
+    cmd += ["--weights", job["weights"], "--energy", job["energy"], "--tol", repr(job["tol"]),
+            "--max-iter", str(job["max_iter"]), "--init", job["init"]]
+    # the method's own options and welding, as given (deform fills in the same defaults)
+    for key, flag in (("sr_alpha", "--sr-alpha"), ("nodes", "--nodes"), ("weld", "--weld")):
+        if job[key] is not None:
+            cmd.append(f"{flag}={job[key]}")
     if job["accelerate"]:
         cmd.append("--accelerate")
     return [*cmd, "-o", output]

@@ -29,6 +29,9 @@ from ..plots.colors import ENERGY_CMAP
 __all__ = ["MethodRun", "comparison_figure", "comparison_rows", "format_rows",
            "method_list", "run_comparison", "write_csv"]
 
+#: compare's labels of the methods it runs at r = 1 (others are labelled by their name)
+LABELS = {"rring": "ARAP", "sr-arap": "SR-ARAP"}
+
 CSV_COLUMNS = ("method", "energy_kind", "iterations", "converged", "time_s", "own_energy",
                "folded_edge_fraction", "volume_change", "max_handle_error")
 
@@ -62,10 +65,13 @@ def method_list(rings: int = 3, rings_map: np.ndarray | None = None,
     >>> [label for label, _ in method_list(4, volumetric=True)][-1]
     'volumetric ARAP'
     """
+    from ..arap.energies.base import CAPABILITIES, offered_by
+
+    # every method registered for compare, at r = 1 where it has a rigidity map
     methods: list[tuple[str, dict[str, Any]]] = [
-        ("ARAP", {"energy": "rring", "rings": 1}),
-        ("SR-ARAP", {"energy": "sr-arap"}),
-        ("embedded", {"energy": "embedded"}),
+        (LABELS.get(name, name),
+         {"energy": name, **({"rings": 1} if CAPABILITIES[name].rigidity_map else {})})
+        for name in offered_by("compare")
     ]
     if rings != 1:
         methods.append((f"r-ring r={rings}", {"energy": "rring", "rings": rings}))

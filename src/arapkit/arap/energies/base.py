@@ -37,12 +37,84 @@ from ..rings import Neighbourhoods, neighbourhoods_from_arrays
 if TYPE_CHECKING:
     from ..problem import EdgeGraph
 
-__all__ = ["ENERGIES", "LOCAL_GLOBAL", "NeighbourhoodEnergy", "make_energy", "rring_energy"]
+__all__ = ["CAPABILITIES", "ENERGIES", "INTERFACES", "LOCAL_GLOBAL", "VOLUMETRIC_INTERFACES",
+           "Capabilities", "NeighbourhoodEnergy", "make_energy", "offered_by",
+           "rring_energy"]
 
+#: the ways to run a method: :class:`arapkit.Deformer`, ``arapkit deform``,
+#: ``arapkit compare``, ``arapkit batch``, the editor's solver and
+#: :class:`arapkit.torch.ARAPLayer`
+INTERFACES = ("library", "deform", "compare", "batch", "editor", "torch")
+#: the interfaces that offer volumetric ARAP (r-ring ARAP on the tetrahedralised inside)
+VOLUMETRIC_INTERFACES = ("library", "deform", "compare", "editor")
+
+
+@dataclass(frozen=True)
+class Capabilities:
+    """What one method can do and where it is offered; the interfaces read this table.
+
+    Attributes
+    ----------
+    local_global : bool
+        Solved by the local/global loop (:mod:`arapkit.arap.loop`); else it has its own solver.
+    rigidity_map : bool
+        Takes a per-vertex ring size r (``rings`` other than 1).
+    accelerate : bool
+        A descent method, so Anderson acceleration with its energy safeguard applies.
+    volumetric : bool
+        Also runs on the tetrahedralised inside (``volumetric=True``).
+    handle_tol : float
+        How far a handle may end from its target, relative to the bounding-box diagonal:
+        0 for hard constraints (met to round-off), the soft constraints' residual bound
+        otherwise.
+    interfaces : tuple of str
+        The :data:`INTERFACES` that offer the method.
+
+    Examples
+    --------
+    >>> CAPABILITIES["rring"].rigidity_map, "torch" in CAPABILITIES["embedded"].interfaces
+    (True, False)
+    """
+
+    local_global: bool
+    rigidity_map: bool = False
+    accelerate: bool = False
+    volumetric: bool = False
+    handle_tol: float = 0.0
+    interfaces: tuple[str, ...] = INTERFACES
+
+
+#: every method of ``Deformer(..., energy=...)`` and ``arapkit deform --energy``, the
+#: default first. ``compare`` runs the paper's comparison set (no spokes-and-rims); the
+#: torch layer needs a local/global method whose single step has a fixed point (not
+#: SR-ARAP's Jacobi coupling). Embedded deformation's constraints are soft (weight 100):
+#: the 2 % bound is the one its tests hold on every mesh (docs/methods.md).
+CAPABILITIES: dict[str, Capabilities] = {
+    "rring": Capabilities(local_global=True, rigidity_map=True, accelerate=True,
+                          volumetric=True),
+    "spokes-and-rims": Capabilities(
+        local_global=True, accelerate=True,
+        interfaces=tuple(i for i in INTERFACES if i != "compare")),
+    "sr-arap": Capabilities(local_global=True,
+                            interfaces=tuple(i for i in INTERFACES if i != "torch")),
+    "embedded": Capabilities(local_global=False, handle_tol=2e-2,
+                             interfaces=tuple(i for i in INTERFACES if i != "torch")),
+}
 #: every method of ``Deformer(..., energy=...)`` and ``arapkit deform --energy``
-ENERGIES = ("rring", "spokes-and-rims", "sr-arap", "embedded")
+ENERGIES = tuple(CAPABILITIES)
 #: those solved by the local/global loop
-LOCAL_GLOBAL = ("rring", "spokes-and-rims", "sr-arap")
+LOCAL_GLOBAL = tuple(name for name, c in CAPABILITIES.items() if c.local_global)
+
+
+def offered_by(interface: str) -> tuple[str, ...]:
+    """The methods an interface offers, in :data:`ENERGIES` order.
+
+    Examples
+    --------
+    >>> offered_by("torch")
+    ('rring', 'spokes-and-rims')
+    """
+    return tuple(name for name, c in CAPABILITIES.items() if interface in c.interfaces)
 
 
 @dataclass(frozen=True, eq=False)

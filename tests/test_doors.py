@@ -1,0 +1,361 @@
+"""Every method through every interface that offers it: the method x interface matrix.
+
+The matrix is generated from the library's own tables
+(:data:`arapkit.arap.energies.base.CAPABILITIES`,
+:data:`arapkit.arap.energies.base.INTERFACES`,
+:data:`arapkit.arap.energies.base.VOLUMETRIC_INTERFACES`, the
+editor's :data:`arapkit.editor.state.METHODS`), so a newly registered method joins it and
+an interface that claims a method but cannot run it fails here. A cell either runs (exit
+0, finite, deformed, handles met: to round-off for hard constraints, within the method's
+``handle_tol`` for soft ones) or is refused with its one-line message (exit 2 on the
+command line).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from arapkit import Deformer
+from arapkit.arap.energies.base import CAPABILITIES, ENERGIES, INTERFACES, VOLUMETRIC_INTERFACES
+from arapkit.errors import InputError
+from arapkit.io.handles import load_handles, save_rings
+from arapkit.mesh.model import load_mesh
+
+ROOT = Path(__file__).resolve().parents[1]
+MESH = ROOT / "examples" / "cactus.off"
+HANDLES = ROOT / "examples" / "cactus.json"
+#: hard constraints: met to round-off of the bounding-box diagonal
+HARD_TOL = 1e-9
+#: free vertices must move at least this much (relative to the diagonal): the arms swing
+MIN_MOTION = 0.02
+
+
+@dataclass(frozen=True)
+class Variant:
+    """One way to ask for a method: energy, rigidity (1, 3 or the mixed map), options."""
+
+    energy: str
+    rings: str = "1"
+    volumetric: bool = False
+    init: str = "identity"
+
+    @property
+    def id(self) -> str:
+        extra = [f"r{self.rings}"] if self.rings != "1" else []
+        extra += ["volumetric"] * self.volumetric + (["laplacian-init"] if self.init !=
+                                                      "identity" else [])
+        return "-".join([self.energy, *extra])
+
+    def refusal(self, interface: str) -> str | None:
+        """The fragment of the one-line refusal this cell must give; None if it runs."""
+        can = CAPABILITIES[self.energy]
+        if interface not in can.interfaces:
+            return "is not available in ARAPLayer"
+        if self.volumetric and interface not in VOLUMETRIC_INTERFACES:
+            return "unknown key 'volumetric'"
+        if self.volumetric and not can.volumetric:
+            return "volumetric=True runs r-ring ARAP"
+        if self.rings != "1" and not can.rigidity_map:
+            return "has no rigidity map"
+        return None
+
+
+def _variants() -> list[Variant]:
+    """Every method at r = 1, r = 3, the mixed map, volumetric, Laplacian init.
+
+    The volume is asked for with the mixed map where the method has one (as ``compare``
+    runs it), so that a refusal has one reason.
+    """
+    out = []
+    for e in ENERGIES:
+        vol_r = "mixed" if CAPABILITIES[e].rigidity_map else "1"
+        out += [Variant(e), Variant(e, "3"), Variant(e, "mixed"),
+                Variant(e, vol_r, volumetric=True), Variant(e, init="laplacian")]
+    return out
+
+
+#: which interfaces can even express a variant (the editor has no "--init"; compare and the
+#: editor take no method name for a method they do not list, the layer has no volume)
+def _expressible(v: Variant, interface: str) -> bool:
+    can = CAPABILITIES[v.energy]
+    if interface == "compare":  # runs its fixed set: nothing to ask, nothing to refuse
+        return interface in can.interfaces and v.refusal(interface) is None \
+            and v.init == "identity"
+    if interface == "editor":  # the painted map is ignored by methods without one
+        return interface in can.interfaces and v.init == "identity" and (
+            v.rings == "1" or can.rigidity_map) and (not v.volumetric or can.volumetric)
+    if interface == "torch":
+        return not v.volumetric and v.init == "identity"
+    return True
+
+
+def _editor_panel_methods() -> tuple[str, ...]:
+    from arapkit.editor.state import METHODS
+
+    return METHODS
+
+
+CELLS = [pytest.param(v, i, id=f"{v.id}@{i}") for v in _variants() for i in INTERFACES
+         if _expressible(v, i)]
+
+
+# ------------------------------------------------------------------------------- the case
+
+
+@cache
+def _case():
+    mesh = load_mesh(MESH)
+    hs = load_handles(HANDLES, mesh.vertices)
+    # stiff arms, soft trunk: a per-vertex map with both values
+    mixed = np.where(mesh.vertices[:, 1] > 6.0, 3, 1).astype(np.int32)
+    return mesh, hs, mixed
+
+
+def _rings(v: Variant):
+    _, _, mixed = _case()
+    return mixed if v.rings == "mixed" else int(v.rings)
+
+
+@pytest.fixture(scope="module")
+def folder(tmp_path_factory) -> Path:
+    d = tmp_path_factory.mktemp("doors")
+    _, _, mixed = _case()
+    save_rings(d / "mixed.txt", mixed)
+    return d
+
+
+def _check_deformed(v: Variant, V: np.ndarray) -> None:
+    """Finite, deformed beyond the handles, handles at their targets."""
+    mesh, hs, _ = _case()
+    diag = mesh.bounding_box_diagonal
+    assert V.shape == mesh.vertices.shape and np.isfinite(V).all()
+    free = np.setdiff1d(np.arange(mesh.n_vertices), hs.indices)
+    assert np.linalg.norm(V[free] - mesh.vertices[free], axis=1).max() > MIN_MOTION * diag
+    err = np.linalg.norm(V[hs.indices] - hs.targets, axis=1).max()
+    assert err <= max(CAPABILITIES[v.energy].handle_tol, HARD_TOL) * diag
+
+
+# ---------------------------------------------------------------------------- interfaces
+
+
+def _library(v: Variant, folder: Path) -> np.ndarray:
+    mesh, hs, _ = _case()
+    kw = {"volumetric": True} if v.volumetric else {}
+    d = Deformer(mesh, hs.indices, rings=_rings(v), energy=v.energy, init=v.init, **kw)
+    return d.solve(hs.targets).vertices
+
+
+def _ply(path: Path) -> np.ndarray:
+    from arapkit.io.fileio import read_ply_vertex_properties
+
+    p = read_ply_vertex_properties(path)
+    return np.stack([p["x"], p["y"], p["z"]], axis=1)
+
+
+def _cli_rings(v: Variant, folder: Path) -> list[str]:
+    return [] if v.rings == "1" else (["--rings", v.rings] if v.rings != "mixed"
+                                      else ["--rings-file", str(folder / "mixed.txt")])
+
+
+def _deform(v: Variant, folder: Path, capsys) -> np.ndarray:
+    from arapkit.cli import main
+
+    out = folder / f"{v.id}.ply"
+    argv = ["deform", str(MESH), "--handles", str(HANDLES), "--energy", v.energy,
+            *_cli_rings(v, folder), "--init", v.init, *(["--volumetric"] * v.volumetric),
+            "-o", str(out), "-q", "--force"]
+    capsys.readouterr()
+    code = main(argv)
+    err = capsys.readouterr().err.strip()
+    if code != 0:
+        assert code == 2 and len(err.splitlines()) == 1, err
+        raise InputError(err)
+    return _ply(out)
+
+
+@cache
+def _compare_run(folder: Path) -> tuple[dict, Path]:
+    """``arapkit compare`` once, with r = 3, the mixed map and the volume: label -> kw."""
+    from arapkit.cli import main
+    from arapkit.workflows.compare import method_list
+
+    out = folder / "compare"
+    code = main(["compare", str(MESH), "--handles", str(HANDLES), "--rings", "3",
+                 "--rings-file", str(folder / "mixed.txt"), "--volumetric", "-o", str(out),
+                 "--quiet"])
+    assert code == 0
+    _, _, mixed = _case()
+    return dict(method_list(3, mixed, volumetric=True)), out
+
+
+def _compare(v: Variant, folder: Path, capsys) -> np.ndarray:
+    from arapkit.cli.compare import _slug
+
+    labels, out = _compare_run(folder)
+    want = _rings(v)
+
+    n = _case()[0].n_vertices
+
+    def same(kw: dict) -> bool:
+        return (kw["energy"] == v.energy and bool(kw.get("volumetric")) == v.volumetric
+                and np.array_equal(np.broadcast_to(kw.get("rings", 1), n),
+                                   np.broadcast_to(want, n)))
+
+    hits = [label for label, kw in labels.items() if same(kw)]
+    assert len(hits) == 1, f"compare does not run {v.id}: {list(labels)}"
+    return _ply(out / f"{_slug(hits[0])}.ply")
+
+
+def _batch(v: Variant, folder: Path, capsys) -> np.ndarray:
+    from arapkit.workflows.batch import normalise_job, run_job
+
+    job = {"mesh": str(MESH), "handles": str(HANDLES), "energy": v.energy, "init": v.init,
+           "output": f"{v.id}.ply"}
+    if v.rings == "mixed":
+        job["rings_file"] = str(folder / "mixed.txt")
+    else:
+        job["rings"] = int(v.rings)
+    if v.volumetric:
+        job["volumetric"] = True
+    row = run_job(normalise_job(job, folder), folder / "batch", resume=False)
+    if row["status"] != "ok":
+        assert row["status"] == "failed" and "\n" not in row["error"]
+        raise InputError(row["error"])
+    return _ply(folder / "batch" / job["output"])
+
+
+def _editor(v: Variant, folder: Path, capsys) -> np.ndarray:
+    from arapkit.editor.state import METHODS, SolverSettings
+    from arapkit.editor.worker import SolveRequest, SolveWorker
+
+    mesh, hs, _ = _case()
+    method = "volumetric" if v.volumetric else ("arap" if v.energy == "rring" else v.energy)
+    assert method in METHODS
+    updates = []
+    w = SolveWorker(updates.append)
+    w.start()
+    try:
+        painted = np.broadcast_to(_rings(v), (mesh.n_vertices,)).astype(np.int32)
+        w.submit(SolveRequest(mesh, hs.indices, hs.targets, painted,
+                              SolverSettings(method=method, max_iter=1000)))
+        assert w.wait_idle(300)
+    finally:
+        w.stop()
+    last = updates[-1]
+    assert last.final
+    if last.error is not None:
+        raise InputError(last.error)
+    return last.vertices
+
+
+def _torch(v: Variant, folder: Path, capsys) -> np.ndarray:
+    torch = pytest.importorskip("torch", reason="PyTorch not installed")
+    from arapkit.torch import ARAPLayer
+
+    mesh, hs, _ = _case()
+    layer = ARAPLayer(mesh, hs.indices, rings=_rings(v), energy=v.energy,
+                      dtype=torch.float64)
+    return layer(torch.tensor(hs.targets)).detach().numpy()
+
+
+DRIVERS = {"library": lambda v, folder, capsys: _library(v, folder), "deform": _deform,
+           "compare": _compare, "batch": _batch, "editor": _editor, "torch": _torch}
+
+
+def test_every_interface_has_a_driver():
+    """An interface added to the library's list must be added to the matrix too."""
+    assert set(INTERFACES) == set(DRIVERS)
+
+
+@pytest.mark.parametrize("variant, interface", CELLS)
+def test_door(variant: Variant, interface: str, folder: Path, capsys):
+    if interface == "batch":
+        pytest.importorskip("distributed", reason="batch jobs need arapkit[batch]")
+    if variant.volumetric:
+        from arapkit.methods.volumetric import have_mesher
+
+        if not have_mesher():
+            pytest.skip("volumetric ARAP needs pip install 'arapkit[volume]'")
+    refusal = variant.refusal(interface)
+    if refusal is None:
+        _check_deformed(variant, DRIVERS[interface](variant, folder, capsys))
+        return
+    with pytest.raises(InputError) as exc:
+        DRIVERS[interface](variant, folder, capsys)
+    msg = str(exc.value)
+    assert refusal in msg and "\n" not in msg
+
+
+def test_cli_embedded_with_default_options_writes_its_report(folder, capsys):
+    """``deform --energy embedded`` (defaults) runs and reports the handle residual."""
+    from arapkit.cli import main
+
+    out, report = folder / "emb.ply", folder / "emb.json"
+    code = main(["deform", str(MESH), "--handles", str(HANDLES), "--energy", "embedded",
+                 "-o", str(out), "--report", str(report), "-q", "--force"])
+    assert code == 0, capsys.readouterr().err
+    rep = json.loads(report.read_text())
+    mesh, hs, _ = _case()
+    V = _ply(out)
+    err = np.linalg.norm(V[hs.indices] - hs.targets, axis=1).max()
+    assert rep["result"]["max_handle_error"] == pytest.approx(err, rel=1e-6)
+    assert rep["result"]["energy_is_sum_of_squares"] is True
+    assert rep["method"] == {"energy": "embedded", "nodes": 200}
+
+
+@pytest.mark.parametrize("method", _editor_panel_methods())
+def test_every_editor_panel_method_solves(method: str):
+    """Each method of the editor's solver panel (Laplacian editing included) deforms."""
+    from arapkit.editor.state import SolverSettings
+    from arapkit.editor.worker import SolveRequest, SolveWorker
+
+    mesh, hs, mixed = _case()
+    if method == "volumetric":
+        from arapkit.methods.volumetric import have_mesher
+
+        if not have_mesher():
+            pytest.skip("volumetric ARAP needs pip install 'arapkit[volume]'")
+    updates = []
+    w = SolveWorker(updates.append)
+    w.start()
+    try:
+        w.submit(SolveRequest(mesh, hs.indices, hs.targets, mixed,
+                              SolverSettings(method=method, max_iter=1000)))
+        assert w.wait_idle(300)
+    finally:
+        w.stop()
+    last = updates[-1]
+    assert last.final and last.error is None
+    energy = method if method in ENERGIES else "rring"  # the others have hard constraints
+    _check_deformed(Variant(energy), last.vertices)
+
+
+def test_laplacian_editing_library():
+    """The library's Laplacian editor on the same case: exact handles, deformed."""
+    from arapkit import LaplacianEditor
+
+    mesh, hs, _ = _case()
+    _check_deformed(Variant("rring"), LaplacianEditor(mesh, hs.indices).solve(hs.targets))
+
+
+def test_batch_report_command_reproduces_the_job(folder, capsys):
+    """The ``deform`` command a batch report records names the method and its options."""
+    pytest.importorskip("distributed", reason="batch jobs need arapkit[batch]")
+    from arapkit.cli import main
+    from arapkit.workflows.batch import normalise_job, report_path, run_job
+
+    job = {"mesh": str(MESH), "handles": str(HANDLES), "energy": "embedded", "nodes": 50,
+           "output": "cmd.ply"}
+    row = run_job(normalise_job(job, folder), folder / "batch", resume=False)
+    assert row["status"] == "ok", row["error"]
+    command = json.loads(report_path(folder / "batch" / "cmd.ply").read_text())["command"]
+    again = folder / "again.ply"
+    argv = command[1:command.index("-o")] + ["-o", str(again), "-q", "--force"]
+    assert main(argv) == 0, capsys.readouterr().err
+    assert np.array_equal(_ply(again), _ply(folder / "batch" / "cmd.ply"))
