@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 
@@ -54,6 +56,68 @@ def test_batch_equals_single_solves(small):
     for b in range(4):
         Xs = layer(torch.tensor(T[b]))
         assert torch.allclose(Xb[b], Xs, rtol=0, atol=1e-9 * _diag(mesh))
+
+
+def _cactus_poses():
+    """examples/cactus.off with the arms of examples/cactus.json turned by 1 %, 30 %, 100 %
+    and 250 % of the file's angles: poses that converge in very different numbers of
+    iterations."""
+    from pathlib import Path
+
+    from arapkit import load_mesh
+    from arapkit.io.handles import parse_handles
+
+    examples = Path(__file__).resolve().parents[1] / "examples"
+    mesh = load_mesh(examples / "cactus.off")
+    spec = json.loads((examples / "cactus.json").read_text())
+    T = []
+    for f in (0.01, 0.3, 1.0, 2.5):
+        for g in spec["groups"][1:]:
+            g["rotate"]["degrees"] *= f
+        hs = parse_handles(spec, mesh.vertices)
+        for g in spec["groups"][1:]:
+            g["rotate"]["degrees"] /= f
+        T.append(hs.targets)
+    return mesh, hs.indices, np.stack(T)
+
+
+@pytest.mark.parametrize("tol", [1e-3, 1e-10])
+def test_batch_poses_stop_on_their_own(tol):
+    """Each pose of a batch stops at its own test: its answer and iteration count are
+    those of its single solve, however long its batch-mates run."""
+    mesh, h, T = _cactus_poses()
+    layer = ARAPLayer(mesh, h, dtype=F64, tol=tol, max_iter=20000)
+    Xb = layer(torch.tensor(T))
+    info = layer.last_info
+    its = []
+    for b in range(len(T)):
+        Xs = layer(torch.tensor(T[b]))
+        assert torch.allclose(Xb[b], Xs, rtol=0, atol=1e-9 * _diag(mesh))
+        assert layer.last_info["converged"] and bool(info["pose_converged"][b])
+        assert int(info["pose_iterations"][b]) == layer.last_info["iterations"]
+        its.append(layer.last_info["iterations"])
+        assert torch.allclose(info["energy"][b], layer.last_info["energy"][0], rtol=1e-12)
+    assert len(set(its)) == len(its) and info["iterations"] == max(its)
+
+
+def test_gradient_of_frozen_poses(small):
+    """Gradients of a batch whose poses stopped at different iterations: each equals the
+    gradient of its single solve, taken at the iterate where that pose stopped."""
+    mesh, h, _ = small
+    T = np.stack([bar_bend(mesh, a)[1] for a in (2, 60, 150)])
+    rng = np.random.default_rng(7)
+    c = torch.tensor(rng.standard_normal((3, mesh.n_vertices, 3)))
+    layer = ARAPLayer(mesh, h, dtype=F64, tol=1e-6, max_iter=20000)
+    Tb = torch.tensor(T, requires_grad=True)
+    (layer(Tb) * c).sum().backward()
+    info = layer.last_info
+    its = []
+    for b in range(3):
+        Ts = torch.tensor(T[b], requires_grad=True)
+        (layer(Ts) * c[b]).sum().backward()
+        assert torch.allclose(Tb.grad[b], Ts.grad, rtol=0, atol=1e-12 * Ts.grad.abs().max())
+        its.append(layer.last_info["iterations"])
+    assert len(set(its)) == 3 and info["pose_iterations"].tolist() == its
 
 
 def _directional_check(layer, t, c, rng, eps=1e-5, n_dirs=2):

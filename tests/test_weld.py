@@ -234,3 +234,108 @@ def test_editor_state_with_weld_and_its_session(tmp_path):
     st.save_session(session)
     again = EditorState.from_session(session)
     assert again.n == 4 and again.mesh.welded_from.index.tolist() == [0, 1, 2, 1, 3, 2]
+
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _cli_vertices(path: Path) -> np.ndarray:
+    p = read_ply_vertex_properties(path)
+    return np.stack([p["x"], p["y"], p["z"]], axis=1)
+
+
+def test_geometric_selectors_act_on_the_welded_mesh(tmp_path):
+    """``nearest`` on a soup with --weld picks k positions, not k copies of one position.
+
+    The reference is the welded mesh saved as a file and deformed without --weld: its
+    handle file names the same ``nearest`` and ``box`` selections and the explicit vertex
+    translated into its own numbering.
+    """
+    soup = explode(load_mesh(ROOT / "examples" / "cactus.off"))
+    w = weld(soup)
+    soup_path, welded_path = tmp_path / "soup.ply", tmp_path / "welded.ply"
+    save_mesh(soup_path, soup.vertices, soup.faces)
+    save_mesh(welded_path, w.vertices, w.faces)
+    assert np.array_equal(load_mesh(welded_path).vertices, w.vertices)
+    lo, hi = w.vertices.min(axis=0), w.vertices.max(axis=0)
+    tip = w.vertices[np.argmax(w.vertices[:, 0])]  # the right arm's outermost point
+    # an explicit input vertex: a soup corner whose welded vertex is on the left arm
+    left = int(np.flatnonzero(soup.vertices[:, 0] < lo[0] + 0.1 * (hi[0] - lo[0]))[-1])
+    groups = [
+        {"name": "pot", "box": {"min": (lo - 1).tolist(),
+                                "max": [hi[0] + 1, lo[1] + 0.1 * (hi[1] - lo[1]), hi[2] + 1]}},
+        {"name": "hand", "nearest": {"point": tip.tolist(), "k": 5},
+         "rotate": {"axis": [0, 0, 1], "degrees": -30, "center": [0, float(tip[1]), 0]}},
+        {"name": "left", "indices": [left], "translate": [0, 0, 0.2]},
+    ]
+    h_soup, h_welded = tmp_path / "h-soup.json", tmp_path / "h-welded.json"
+    h_soup.write_text(json.dumps(groups))
+    groups[2]["indices"] = [int(w.welded_from.index[left])]
+    h_welded.write_text(json.dumps(groups))
+    outs = tmp_path / "soup-out.ply", tmp_path / "welded-out.ply"
+    for mesh, h, out, weld_opt in ((soup_path, h_soup, outs[0], ["--weld"]),
+                                   (welded_path, h_welded, outs[1], [])):
+        p = arapkit("deform", mesh, "-H", h, *weld_opt, "-o", out, "-q", "--tol", "1e-8")
+        assert p.returncode == 0, p.stderr
+    got, ref = _cli_vertices(outs[0]), _cli_vertices(outs[1])
+    diag = w.bounding_box_diagonal
+    assert np.abs(ref - w.vertices).max() > 0.01 * diag  # the arm did move
+    np.testing.assert_allclose(got, ref[w.welded_from.index], rtol=0, atol=1e-10 * diag)
+    # the explicit input vertex went where its group sent it, with all its copies
+    copies = np.flatnonzero(w.welded_from.index == w.welded_from.index[left])
+    assert len(copies) > 1
+    np.testing.assert_allclose(got[copies], soup.vertices[copies] + [0, 0, 0.2],
+                               rtol=0, atol=1e-10 * diag)
+
+
+def test_welded_handle_resolution_by_hand():
+    """Selections on the welded square (4 positions), vertex numbers on the soup (6)."""
+    from arapkit.io.handles import parse_handles
+
+    soup = square_soup()
+    w = weld(soup)
+    V = soup.vertices
+    # nearest to (1, 0.1): welded 1 at (1, 0) and then welded 3 at (1, 1) -- on the soup
+    # the two copies of (1, 0) would be the 2 nearest
+    hs = parse_handles([{"nearest": {"point": [1, 0.1, 0], "k": 2}, "translate": [0, 0, 1]},
+                        {"indices": [0]}], V, welded=w)
+    assert [g.indices.tolist() for g in hs.groups] == [[1, 3], [0]]
+    assert hs.targets.tolist() == [[1, 0, 1], [1, 1, 1], [0, 0, 0]]
+    # different copies of one position in two indices groups: one handle, the first group's
+    hs = parse_handles([{"indices": [1]}, {"indices": [3, 4]}], V, welded=w)
+    assert [g.indices.tolist() for g in hs.groups] == [[1], [3]]
+    # a geometric group selecting a welded vertex already held is an overlap, as unwelded
+    with pytest.raises(InputError, match=r"h.json: handle group 2: overlaps group 'a'.*welded "
+                                         r"vertex 1"):
+        parse_handles([{"name": "a", "indices": [3]},
+                       {"sphere": {"center": [1, 0, 0], "radius": 0.1}}], V, "h.json", welded=w)
+    # vertex numbers are the input's: 5 exists on the soup, not on the welded square
+    assert parse_handles([{"indices": [5]}], V, welded=w).indices.tolist() == [2]
+    with pytest.raises(InputError, match=r"vertex index 6 out of range \(mesh has 6 vertices"):
+        parse_handles([{"indices": [6]}], V, welded=w)
+    with pytest.raises(InputError, match="input vertices 1 and 3 were welded into one"):
+        parse_handles([{"indices": [1]}, {"indices": [3], "translate": [0, 0, 1]}], V,
+                      welded=w)
+
+
+def test_editor_and_batch_jobs_select_on_the_welded_mesh(tmp_path):
+    """The editor's --handles and a batch job's inline handles resolve like deform."""
+    import argparse
+
+    from arapkit.cli.edit import build_state
+    from arapkit.workflows.jobs import DeformJob, load_job_inputs
+
+    soup = square_soup()
+    path = tmp_path / "sq.off"
+    save_mesh(path, soup.vertices, soup.faces)
+    groups = [{"name": "a", "indices": [5]},
+              {"name": "b", "nearest": {"point": [1, 0.1, 0], "k": 2}, "translate": [0, 0, 1]}]
+    h = tmp_path / "h.json"
+    h.write_text(json.dumps(groups))
+    ns = argparse.Namespace(mesh=str(path), rings_file=None, rings=1, handles=str(h),
+                            session=None, weld=1e-7)
+    st = build_state(ns)
+    assert [(x.name, x.vertices.tolist()) for x in st.handles] == [("a", [2]), ("b", [1, 3])]
+    inputs = load_job_inputs(DeformJob(mesh=str(path), handles=groups, weld=1e-7))
+    assert inputs.handles.indices.tolist() == [2, 1, 3]
+    assert inputs.handles.targets.tolist() == [[0, 1, 0], [1, 0, 1], [1, 1, 1]]

@@ -25,6 +25,7 @@ from numpy.linalg import norm as np_norm
 
 from arapkit.arap.backends.torch_backend import (
     TorchSystem,
+    _pose_sums,
     best_rotations,
     check_dtype,
     fit_rotations,
@@ -64,8 +65,9 @@ def _check_targets(T, system: TorchSystem, handles) -> tuple[_torch.Tensor, bool
 
 
 def _bdot(a: _torch.Tensor, b: _torch.Tensor) -> _torch.Tensor:
-    """Per-batch inner product of ``(B, ...)`` tensors, shaped ``(B, 1, 1)``."""
-    return (a * b).sum(dim=(1, 2), keepdim=True)
+    """Per-batch inner product of ``(B, ...)`` tensors, shaped ``(B, 1, 1)`` (each pose
+    rounded as alone, so that a pose's gradient does not depend on its batch-mates)."""
+    return _pose_sums(a * b)[:, None, None]
 
 
 class _ARAPSolve(_torch.autograd.Function):
@@ -123,22 +125,28 @@ class _ARAPSolve(_torch.autograd.Function):
 
 
 def _pcg(apply_H, precond, g: _torch.Tensor, tol: float, max_iter: int):
-    """Solve ``H mu = g`` per batch element by preconditioned conjugate gradients."""
+    """Solve ``H mu = g`` per batch element by preconditioned conjugate gradients.
+
+    A batch element that meets its tolerance stops there (its step is zero from then
+    on), so its ``mu`` does not depend on the others.
+    """
     mu = _torch.zeros_like(g)
     r = g.clone()
     g_norm = _torch.sqrt(_bdot(g, g))
     z = precond(r)
     p = z.clone()
     rz = _bdot(r, z)
+    live = _torch.ones_like(rz, dtype=_torch.bool)
     it = 0
     while it < max_iter:
         it += 1
         Hp = apply_H(p)
         pHp = _bdot(p, Hp)
-        alpha = _torch.where(pHp != 0, rz / pHp, _torch.zeros_like(rz))
+        alpha = _torch.where(live & (pHp != 0), rz / pHp, _torch.zeros_like(rz))
         mu = mu + alpha * p
         r = r - alpha * Hp
-        if bool((_torch.sqrt(_bdot(r, r)) <= tol * g_norm).all()):
+        live &= _torch.sqrt(_bdot(r, r)) > tol * g_norm
+        if not bool(live.any()):
             break
         z = precond(r)
         rz_new = _bdot(r, z)
@@ -184,8 +192,9 @@ class ARAPLayer(_torch.nn.Module):
         The local/global energy (SR-ARAP's rotation coupling has no fixed point of one
         step alone and is not offered here).
     tol, max_iter :
-        The forward's stopping test, as for :class:`arapkit.Deformer` (every pose of a
-        batch must pass it). Gradients are those of the exact solution: a loose ``tol``
+        The forward's stopping test, as for :class:`arapkit.Deformer`. Each pose of a
+        batch stops when it passes the test itself, so it gets the answer (and iteration
+        count) of its own single solve. Gradients are those of the exact solution: a loose ``tol``
         gives gradients of a point near it.
     xtol : float, optional
         Also stop when no free vertex moved more than ``xtol`` times the rest shape's
@@ -264,37 +273,73 @@ class ARAPLayer(_torch.nn.Module):
         return X if batched else X[0]
 
     def _iterate(self, T: _torch.Tensor) -> tuple[_torch.Tensor, dict]:
-        """The local/global loop from the rest shape (internal numbering, no autograd)."""
+        """The local/global loop from the rest shape (internal numbering, no autograd).
+
+        Each pose of a batch stops at its own stopping test and keeps the iterate at
+        which it passed: the poses still running go on alone, so a pose's answer and
+        iteration count do not depend on its batch-mates.
+        """
         ts = self.system
         B = T.shape[0]
         C = ts.constrained(T)
         fixed = ts.fixed_rhs(C)
-        rhs = ts.b_rest_free[None] - fixed
-        E_prev = None
         floor = 1e-24 * max(abs(ts.rest_term), 1e-300)
-        converged = False
-        it = 0
+        out = _Frozen(ts.b_rest_free.new_zeros(B, ts.nf, 3))
+        live = _torch.arange(B, device=T.device)  # the poses still iterating
+        rhs = ts.b_rest_free[None] - fixed
         x = ts.b_rest_free.new_zeros(B, ts.nf, 3)
+        E_prev = None
         for it in range(1, self.max_iter + 1):
             x, x_prev = ts.solve(rhs), x
             P = ts.assemble(x, C)
             S = ts.covariances(P)
             R = best_rotations(S)
             E = ts.energy_expanded(P, R, S)
-            # relative decrease, as arapkit.arap.loop; every pose of the batch must pass
-            if E_prev is not None:
-                rel = (E_prev - E).abs() / E_prev.abs().clamp_min(1e-300)
-                converged = bool(((rel < self.tol) | (E.abs() <= floor)).all())
-            elif bool((E.abs() <= floor).all()):
-                converged = True
-            if self._step_tol is not None and it > 1 and ts.nf:
-                converged |= bool((x - x_prev).abs().amax() <= self._step_tol)
-            if converged:
+            passed = self._passed(E, E_prev, x - x_prev, it, floor)
+            done = passed | (it == self.max_iter)
+            out.keep(live[done], x[done], E[done], it, passed[done])
+            if bool(done.all()):
                 break
-            E_prev = E
+            go = ~done
+            live, x, C, fixed, E_prev, R = live[go], x[go], C[go], fixed[go], E[go], R[go]
             rhs = ts.rhs(R)[:, ts.free] - fixed
         s2 = self.problem.scale ** 2
-        return x, {"iterations": it, "converged": converged, "energy": E.detach() * s2}
+        return out.x, {"iterations": int(out.iterations.max()),
+                       "converged": bool(out.converged.all()),
+                       "energy": out.energy * s2,
+                       "pose_iterations": out.iterations,
+                       "pose_converged": out.converged}
+
+    def _passed(self, E: _torch.Tensor, E_prev: _torch.Tensor | None, step: _torch.Tensor,
+                it: int, floor: float) -> _torch.Tensor:
+        """Per pose: the stopping test of :func:`arapkit.arap.loop.local_global` (relative
+        energy decrease below ``tol``, or an energy at round-off level), or ``xtol``."""
+        passed = E.abs() <= floor
+        if E_prev is not None:
+            passed |= (E_prev - E).abs() / E_prev.abs().clamp_min(1e-300) < self.tol
+        if self._step_tol is not None and it > 1 and self.system.nf:
+            passed |= step.abs().amax(dim=(1, 2)) <= self._step_tol
+        return passed
+
+
+class _Frozen:
+    """The forward's answer per pose, filled in as each pose stops."""
+
+    def __init__(self, x: _torch.Tensor) -> None:
+        B = x.shape[0]
+        self.x = x
+        self.energy = x.new_zeros(B)
+        self.iterations = _torch.zeros(B, dtype=_torch.int64)
+        self.converged = _torch.zeros(B, dtype=_torch.bool)
+
+    def keep(self, poses: _torch.Tensor, x: _torch.Tensor, E: _torch.Tensor, it: int,
+             passed: _torch.Tensor) -> None:
+        """Record the iterate ``x`` (energy ``E``) of ``poses`` stopped at iteration ``it``."""
+        self.x[poses] = x
+        self.energy[poses] = E
+        cpu = poses.cpu()
+        self.iterations[cpu] = it
+        self.converged[cpu] = passed.cpu()
 
 
 _SYSTEMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()

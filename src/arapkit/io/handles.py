@@ -412,7 +412,9 @@ def _group_list(data: Any, source: str) -> list:
     return data
 
 
-def parse_handles(data: Any, vertices: np.ndarray, source: str = "<handles>") -> HandleSet:
+def parse_handles(
+    data: Any, vertices: np.ndarray, source: str = "<handles>", welded: Any = None
+) -> HandleSet:
     """Resolve a parsed handle description against rest vertex positions.
 
     Parameters
@@ -423,6 +425,13 @@ def parse_handles(data: Any, vertices: np.ndarray, source: str = "<handles>") ->
         Rest positions; selections and rotations use them.
     source : str
         Name used in error messages (normally the file name).
+    welded : Mesh, optional
+        A mesh made by :func:`arapkit.mesh.welding.weld` from the mesh whose positions are
+        ``vertices``. The handles are then resolved for the solve on it: ``box``,
+        ``sphere`` and ``nearest`` select its vertices (so ``nearest`` counts positions,
+        not copies of one position), while ``indices`` keep numbering the input's
+        vertices and are mapped through the weld
+        (:func:`arapkit.mesh.welding.weld_handles`). The result indexes ``welded``.
 
     Returns
     -------
@@ -443,10 +452,21 @@ def parse_handles(data: Any, vertices: np.ndarray, source: str = "<handles>") ->
     ...                                 "center": [0, 0, 0]}}], V)
     >>> np.round(hs.targets, 12).tolist()
     [[0.0, 1.0, 0.0]]
+
+    On a welded soup ``nearest`` picks distinct positions, ``indices`` input vertices:
+
+    >>> from arapkit.mesh.welding import weld
+    >>> from arapkit import Mesh
+    >>> soup = Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]],
+    ...             [[0, 1, 2], [3, 4, 5]])
+    >>> hs = parse_handles([{"nearest": {"point": [1, 0, 0], "k": 2}}, {"indices": [4]}],
+    ...                    soup.vertices, welded=weld(soup))
+    >>> [g.indices.tolist() for g in hs.groups]
+    [[0, 1], [3]]
     """
     V = np.asarray(vertices, dtype=np.float64)
+    space = _Space(V, welded, source)
     groups: list[HandleGroup] = []
-    owner = np.full(len(V), -1, dtype=np.int64)
     names: dict[str, int] = {}
     for number, g in enumerate(_group_list(data, source), start=1):
         name = g.get("name") if isinstance(g, dict) else None
@@ -458,22 +478,80 @@ def parse_handles(data: Any, vertices: np.ndarray, source: str = "<handles>") ->
         if name in names:
             raise err(f"name {_short(name)} already used by group {names[name]}")
         names[name] = number
-        idx = _select(g, V, err)
+        group = space.resolve(g, name, err)
+        if group is not None:
+            groups.append(group)
+    space.check_copies()
+    return HandleSet(groups, source=source)
+
+
+class _Space:
+    """Resolves handle groups into the vertex numbering of the solve, and keeps which
+    group owns each vertex (two groups may not select the same vertex).
+
+    Without a weld, everything happens on ``vertices``. With one, geometric selections
+    act on the welded vertices and explicit ``indices`` on the input's, mapped through
+    the weld; copies of one position listed by different ``indices`` groups become one
+    handle owned by the first (as on the input, where they are distinct vertices), once
+    :meth:`check_copies` has made sure their targets agree.
+    """
+
+    def __init__(self, vertices: np.ndarray, welded: Any, source: str) -> None:
+        self.vertices, self.welded, self.source = vertices, welded, source
+        if welded is not None and len(welded.welded_from.index) != len(vertices):
+            raise ValueError(f"{len(vertices)} vertices for a mesh welded from "
+                             f"{len(welded.welded_from.index)}")
+        n = len(vertices) if welded is None else welded.n_vertices
+        self.owner = np.full(n, -1, dtype=np.int64)
+        self.names: list[str] = []
+        self.explicit: list[bool] = []
+        # input vertices of ``indices`` groups and their targets, for check_copies
+        self.listed: list[tuple[np.ndarray, np.ndarray]] = []
+        self.input_owner = np.full(len(vertices), -1, dtype=np.int64)
+
+    def resolve(self, g: dict, name: str, err: _Where) -> HandleGroup | None:
+        """The group in the solve's numbering (None when copies claimed all of it)."""
+        explicit = "indices" in g
+        on = self.vertices if self.welded is None or explicit else self.welded.vertices
+        idx = _select(g, on, err)
+        targets, kind = _move(g, on[idx], err)
+        if not np.isfinite(targets).all():
+            raise err("the motion puts targets beyond double precision (too large to represent)")
+        _check_reach(targets, idx, on, err)
+        number = len(self.names)
+        if self.welded is not None and explicit:
+            self._claim(self.input_owner, idx, err)  # one input vertex in two groups
+            self.input_owner[idx] = number
+            self.listed.append((idx, targets))
+            from arapkit.mesh.welding import weld_handles
+
+            idx, targets = weld_handles(self.welded, idx, targets, what=self.source)
+            # copies already held by an earlier indices group stay there
+            by_list = np.array(self.explicit + [False])[self.owner[idx]]  # -1: unowned
+            idx, targets = idx[~by_list], targets[~by_list]
+        self._claim(self.owner, idx, err)
+        self.owner[idx] = number
+        self.names.append(name)
+        self.explicit.append(explicit)
+        return HandleGroup(name, idx, targets, kind) if len(idx) else None
+
+    def _claim(self, owner: np.ndarray, idx: np.ndarray, err: _Where) -> None:
         taken = owner[idx] >= 0
         if np.any(taken):
             first = int(idx[np.argmax(taken)])
-            other = groups[owner[first]].name
+            what = "welded vertex" if owner is self.owner and self.welded is not None else "vertex"
             raise err(
-                f"overlaps group {_short(other)}: both select vertex {first} "
+                f"overlaps group {_short(self.names[owner[first]])}: both select {what} {first} "
                 f"({int(taken.sum())} shared vertices)"
             )
-        owner[idx] = len(groups)
-        targets, kind = _move(g, V[idx], err)
-        if not np.isfinite(targets).all():
-            raise err("the motion puts targets beyond double precision (too large to represent)")
-        _check_reach(targets, idx, V, err)
-        groups.append(HandleGroup(name, idx, targets, kind))
-    return HandleSet(groups, source=source)
+
+    def check_copies(self) -> None:
+        """Refuse copies of one position sent to different targets by different groups."""
+        if self.listed:
+            from arapkit.mesh.welding import weld_handles
+
+            weld_handles(self.welded, np.concatenate([i for i, _ in self.listed]),
+                         np.concatenate([t for _, t in self.listed]), what=self.source)
 
 
 def _read_text(path: Path, what: str) -> str:
@@ -485,7 +563,10 @@ def _read_text(path: Path, what: str) -> str:
 
 
 def load_handles(
-    path: str | os.PathLike, vertices: np.ndarray, transform: str | os.PathLike | None = None
+    path: str | os.PathLike,
+    vertices: np.ndarray,
+    transform: str | os.PathLike | None = None,
+    welded: Any = None,
 ) -> HandleSet:
     """Read handles from a JSON file or a ``.sel`` (+ ``.def``) pair.
 
@@ -497,6 +578,10 @@ def load_handles(
         Rest positions.
     transform : path, optional
         ``.def`` 4x4 matrix for a ``.sel`` file; defaults to the ``.def`` next to it.
+    welded : Mesh, optional
+        A mesh welded (:func:`arapkit.mesh.welding.weld`) from the mesh of ``vertices``: the
+        handles come back on its vertices, geometric selections made on it and vertex
+        numbers read as the input's (see :func:`parse_handles`).
 
     Returns
     -------
@@ -516,11 +601,16 @@ def load_handles(
             transform = path.with_suffix(".def")
             if not transform.exists():
                 raise InputError(f"{path}: a .sel file needs a .def transform (--transform FILE)")
-        return load_sel(path, vertices, load_def(transform), transform)
+        hs = load_sel(path, vertices, load_def(transform), transform)
+        if welded is None:
+            return hs
+        from arapkit.mesh.welding import weld_handle_set
+
+        return weld_handle_set(welded, hs)  # statuses number the input's vertices
     if transform is not None:
         raise InputError(f"{transform}: a .def transform only applies to .sel handle files")
     data = parse_json(read_input(path, "handle files"), str(path))
-    return parse_handles(data, vertices, source=str(path))
+    return parse_handles(data, vertices, source=str(path), welded=welded)
 
 
 def handles_to_json(handles: HandleSet) -> list[dict]:

@@ -239,6 +239,11 @@ def weld_handles(
 def weld_handle_set(mesh: Mesh, handle_set):
     """A :class:`~arapkit.io.handles.HandleSet` read on the input, on the welded vertices.
 
+    For sets resolved by input vertex (``.sel`` statuses, explicit indices). A handle file
+    with ``box``, ``sphere`` or ``nearest`` groups should be read with
+    ``load_handles(path, vertices, welded=mesh)`` instead, so that those select welded
+    vertices (``nearest`` on the input would count copies of one position).
+
     Each group is mapped with :func:`weld_handles`; a welded vertex claimed by several
     groups (through different copies) stays in the first, and copies with targets too
     far apart are refused.

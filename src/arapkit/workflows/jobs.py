@@ -125,14 +125,16 @@ class PreparedJob:
         return self.deformer.solve(self.handles.targets, callback=callback)
 
 
-def _load_handles(job: DeformJob, vertices: np.ndarray):
+def _load_handles(job: DeformJob, source: Any, mesh: Any):
+    """The job's handles on ``mesh`` (``source`` welded, or ``source`` itself)."""
     from ..io.handles import load_handles, parse_handles
 
+    welded = None if mesh is source else mesh
     if isinstance(job.handles, (str, os.PathLike)):
-        return load_handles(job.handles, vertices, job.transform)
+        return load_handles(job.handles, source.vertices, job.transform, welded=welded)
     if job.transform is not None:
         raise InputError(f"{job.transform}: a .def transform only applies to .sel handle files")
-    return parse_handles(job.handles, vertices, source="<handles>")
+    return parse_handles(job.handles, source.vertices, source="<handles>", welded=welded)
 
 
 @dataclass
@@ -185,12 +187,8 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
         mesh = weld(source, job.weld)
     for msg in mesh.notes if mesh is source else source.notes + mesh.notes:
         tell(msg)
-    # handles and a rings map refer to the input's vertices: map them onto a welded mesh
-    hs = _load_handles(job, source.vertices)
-    if mesh is not source:
-        from ..mesh.welding import weld_handle_set
-
-        hs = weld_handle_set(mesh, hs)
+    # vertex numbers in handles and a rings map are the input's: mapped onto a welded mesh
+    hs = _load_handles(job, source, mesh)
     if job.rings_file:
         from ..io.handles import load_rings
 

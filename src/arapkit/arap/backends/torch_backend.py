@@ -38,8 +38,11 @@ from ..problem import ARAPProblem
 
 __all__ = ["TorchBackend", "TorchSystem", "best_rotations", "fit_rotations", "resolve_device"]
 
-#: cholespy's CUDA solver takes at most this many right-hand sides per call
+#: cholespy's CUDA solver takes at most this many right-hand sides per call (a multiple
+#: of _BLOCK)
 _CUDA_MAX_RHS = 128
+#: columns per pose in a solve: x, y, z and a zero column (see TorchSystem.solve)
+_BLOCK = 4
 
 _CUDA_REMEDY = ("install a CUDA build of torch (pip install 'arapkit[torch]' on a machine "
                 "with an NVIDIA driver) or use device='cpu'")
@@ -322,12 +325,17 @@ class TorchSystem:
         return self
 
     def solve(self, rhs: torch.Tensor) -> torch.Tensor:
-        """``A_ff^{-1} rhs`` for ``(B, nf, 3)``: all 3B columns in one triangular solve.
+        """``A_ff^{-1} rhs`` for ``(B, nf, 3)``: all poses in one triangular solve.
 
-        (On CUDA cholespy takes at most 128 columns per call; more are split.)
+        Each pose's 3 columns go in as a block of 4 (with a zero column): CHOLMOD solves
+        right-hand sides 4 at a time, with another rounding than for 1-3 columns, so
+        blocks aligned to the poses give every pose of a batch exactly its single solve.
+        (On CUDA cholespy takes at most 128 columns per call; more are split, also on
+        pose boundaries.)
         """
         B = rhs.shape[0]
-        cols = rhs.permute(1, 0, 2).reshape(self.nf, 3 * B).contiguous()
+        cols = torch.cat([rhs, rhs.new_zeros(B, self.nf, 1)], dim=2)
+        cols = cols.permute(1, 0, 2).reshape(self.nf, _BLOCK * B).contiguous()
         out = torch.empty_like(cols)
         if self._factor is not None:
             step = _CUDA_MAX_RHS if self.device.type == "cuda" else cols.shape[1]
@@ -339,7 +347,7 @@ class TorchSystem:
                     res = torch.empty_like(blk)
                     self._factor.solve(blk, res)
                     out[:, c0:c0 + step] = res
-        return out.reshape(self.nf, B, 3).permute(1, 0, 2)
+        return out.reshape(self.nf, B, _BLOCK)[:, :, :3].permute(1, 0, 2)
 
     def apply_A(self, x: torch.Tensor) -> torch.Tensor:
         """``A_ff x`` for ``(B, nf, 3)``."""
@@ -377,7 +385,7 @@ class TorchSystem:
         far from the origin. A rotation coupling adds ``sum_j c_kj R_prev[j]^T``.
         """
         B = P.shape[0]
-        Pc = (P - P.mean(dim=1, keepdim=True)).permute(1, 0, 2).reshape(self.n, 3 * B)
+        Pc = _centred(P).permute(1, 0, 2).reshape(self.n, 3 * B)
         S = torch.sparse.mm(self.C, Pc).reshape(self.n, 3, B, 3).permute(2, 0, 1, 3)
         if self.rc_k is not None and R_prev is not None:
             RT = R_prev[:, self.rc_j].transpose(-1, -2) * self.rc_w[None, :, None, None]
@@ -413,10 +421,33 @@ class TorchSystem:
         B = P.shape[0]
         # sum_e D_e |e'|^2 = tr(P^T L P): one sparse product (gathers are slow on CPU);
         # centring is exact (L 1 = 0) and spares float32 the cancellation far from the origin
-        Pc = (P - P.mean(dim=1, keepdim=True)).permute(1, 0, 2).reshape(self.n, 3 * B)
-        quad = (Pc * torch.sparse.mm(self.L, Pc)).reshape(self.n, B, 3).sum(dim=(0, 2))
-        tr = (R * S.transpose(-1, -2)).sum(dim=(-1, -2, -3))
-        return quad + self.rest_term - 2.0 * tr
+        Pc = _centred(P).permute(1, 0, 2).reshape(self.n, 3 * B)
+        quad = (Pc * torch.sparse.mm(self.L, Pc)).reshape(self.n, B, 3).transpose(0, 1)
+        tr = R * S.transpose(-1, -2)
+        return _pose_sums(quad) + self.rest_term - 2.0 * _pose_sums(tr)
+
+
+def _per_pose(f, X: torch.Tensor) -> torch.Tensor:
+    """``f`` applied to each pose ``X[b:b+1]`` alone, concatenated.
+
+    For reductions over a pose: torch splits a long sum into parts by the shape of the
+    whole tensor (and the threads), so the same pose summed within a batch would be
+    rounded otherwise than alone, and a stopping test near round-off would stop a pose
+    at another iteration in a batch than in its single solve.
+    """
+    if X.shape[0] == 1:
+        return f(X)
+    return torch.cat([f(X[b:b + 1]) for b in range(X.shape[0])])
+
+
+def _centred(P: torch.Tensor) -> torch.Tensor:
+    """Positions ``(B, n, 3)`` minus each pose's centroid (rounded as for the pose alone)."""
+    return P - _per_pose(lambda x: x.mean(dim=1, keepdim=True), P)
+
+
+def _pose_sums(X: torch.Tensor) -> torch.Tensor:
+    """``(B,)`` sums of all entries of each pose of ``X`` (rounded as for the pose alone)."""
+    return _per_pose(lambda x: x.reshape(1, -1).sum(dim=1), X)
 
 
 # -- the backend behind the loop -----------------------------------------------------
