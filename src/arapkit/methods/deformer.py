@@ -101,7 +101,7 @@ def _make_backend(problem: ARAPProblem, device: str):
     return TorchBackend(problem, "cpu" if device == "torch-cpu" else device)
 
 
-def check_method(energy: str, sr_alpha=None, nodes=None) -> dict:
+def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None) -> dict:
     """Validate a method name and its options; return the method's options.
 
     Examples
@@ -115,10 +115,13 @@ def check_method(energy: str, sr_alpha=None, nodes=None) -> dict:
         raise InputError(f"sr_alpha is an option of energy 'sr-arap', not '{energy}'")
     if nodes is not None and energy != "embedded":
         raise InputError(f"nodes is an option of energy 'embedded', not '{energy}'")
+    if sr_roi is not None and energy != "sr-arap":
+        raise InputError(f"sr_roi is an option of energy 'sr-arap', not '{energy}'")
     if energy == "sr-arap":
         from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
 
-        return {"alpha": check_alpha(DEFAULT_ALPHA if sr_alpha is None else sr_alpha)}
+        alpha = check_alpha(DEFAULT_ALPHA if sr_alpha is None else sr_alpha)
+        return {"alpha": alpha} if sr_roi is None else {"alpha": alpha, "roi": sr_roi}
     if energy == "embedded":
         from .embedded import DEFAULT_NODES, check_nodes
 
@@ -135,6 +138,16 @@ def _rows(ptr: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return new_ptr, idx
 
 
+def _check_outside_roi_is_held(mesh: Mesh, roi, handles) -> None:
+    """CGAL keeps the vertices outside its ROI where they are: here they must be handles."""
+    loose = np.ones(mesh.n_vertices, dtype=bool)
+    loose[np.asarray(roi)] = False
+    loose[np.asarray(handles, dtype=np.int64)] = False
+    if loose.any():
+        raise InputError(f"{mesh.name}: vertex {int(np.flatnonzero(loose)[0])} is outside "
+                         "sr_roi but not a handle (hold every vertex outside the ROI)")
+
+
 class Deformer:
     """ARAP deformer: r-ring rigidity (default) or another method on the same handles.
 
@@ -146,7 +159,7 @@ class Deformer:
     rings : int or (n,) int
         Neighbourhood size r per vertex (1 = standard ARAP; larger = stiffer). Only for
         ``energy="rring"``.
-    weights : {"cotan", "cotan-clamped", "uniform"}
+    weights : {"cotan", "cotan-clamped", "cotan-clamped-each", "uniform"}
         Edge weights (see :mod:`arapkit.mesh.weights`).
     energy : {"rring", "spokes-and-rims", "sr-arap", "embedded"}
         The method (see ``docs/methods.md``): r-ring ARAP (Chen et al. 2017),
@@ -155,6 +168,12 @@ class Deformer:
     sr_alpha : float, optional
         SR-ARAP's rotation-smoothness weight (default 0.02, CGAL's), scaled by the surface
         area as CGAL does.
+    sr_roi : (k,) int, optional
+        SR-ARAP only: pose CGAL's problem for a partial region of interest (its vertex ids,
+        handles included; a ``.sel`` file's statuses 1 and 2). Vertices outside it must be
+        handles (held at rest). Rotations are then coupled only within the ROI and its
+        one-ring, as in CGAL's ``Surface_mesh_deformation``; without it every vertex's
+        rotation is coupled to all its neighbours' (``docs/methods.md``).
     nodes : int, optional
         Embedded deformation's graph size (default 200, at most the vertex count).
     tol : float
@@ -217,7 +236,7 @@ class Deformer:
         if not CAPABILITIES[energy].volumetric:
             raise InputError(f"volumetric=True runs r-ring ARAP; energy '{energy}' is for "
                              "surfaces")
-        for key in ("energy", "sr_alpha", "nodes"):
+        for key in ("energy", "sr_alpha", "sr_roi", "nodes"):
             options.pop(key, None)
         return VolumetricDeformer(mesh, handles, rings,
                                   density=DEFAULT_DENSITY if density is None else density,
@@ -234,6 +253,7 @@ class Deformer:
         density: float | None = None,
         energy: str = "rring",
         sr_alpha: float | None = None,
+        sr_roi=None,
         nodes: int | None = None,
         tol: float = 1e-3,
         max_iter: int = 1000,
@@ -245,7 +265,7 @@ class Deformer:
         device: str = "cpu",
     ) -> None:
         self.device = _check_device(device)
-        options = check_method(energy, sr_alpha, nodes)
+        options = check_method(energy, sr_alpha, nodes, sr_roi)
         self.mesh = mesh
         self.energy = energy
         self.weights_kind = weights
@@ -277,6 +297,8 @@ class Deformer:
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
             reorder=reorder, **options)
         self._rings = self.problem.energy.rings[self.problem.iperm]
+        if sr_roi is not None:
+            _check_outside_roi_is_held(mesh, sr_roi, handles)
         self.backend = _make_backend(self.problem, self.device)
         self._weight_notes = self._check_rest_is_minimum()
 

@@ -248,6 +248,9 @@ def make_energy(name: str, graph: EdgeGraph, w: np.ndarray, weights_kind: str | 
         if options:
             raise InputError(f"energy 'spokes-and-rims' takes no option {sorted(options)[0]!r}")
         return spokes_and_rims_energy(graph, w, weights_kind)
-    from .sr_arap import sr_arap_energy
+    from .sr_arap import check_roi, sr_arap_energy
 
+    if options.get("roi") is not None:
+        roi = check_roi(options["roi"], graph.n_vertices)
+        options["roi"] = roi if perm is None else roi[perm]
     return sr_arap_energy(graph, w, **options)
