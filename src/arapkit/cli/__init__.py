@@ -23,6 +23,7 @@ import sys
 import traceback
 from collections.abc import Sequence
 
+from arapkit import __version__
 from arapkit.errors import InputError, worded_for
 
 __all__ = ["COMMANDS", "build_parser", "main"]
@@ -45,15 +46,6 @@ _EPILOG = """examples (from a clone of the repository, which ships examples/):
   arapkit deform examples/cactus.off -H examples/cactus.json -r 4 -o bent.ply --figure bent.png
   arapkit deform examples/bar.off --handles examples/bar.sel --transform examples/bar.def -o out.off
 """
-
-
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("arapkit")
-    except Exception:  # not installed (running from a source tree)
-        return "unknown"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -80,7 +72,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=f"arapkit {_version()}")
+    parser.add_argument("--version", action="version", version=f"arapkit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in COMMANDS:
         mod = importlib.import_module(module)

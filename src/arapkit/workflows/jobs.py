@@ -34,6 +34,7 @@ from typing import Any
 
 import numpy as np
 
+from .. import __version__
 from ..arap.energies.base import ENERGIES
 from ..errors import Advice, InputError
 from ..mesh.weights import DEFAULT_WEIGHTS
@@ -295,12 +296,11 @@ def job_report(
 ) -> dict[str, Any]:
     """The JSON report of a solved job: inputs, parameters, handles, result, timings."""
     from ..arap.rings import rings_summary
-    from ..cli import _version
 
     mesh, hs = prepared.mesh, prepared.handles
     r = prepared.rings
     return {
-        "arapkit_version": _version(),
+        "arapkit_version": __version__,
         "command": command,
         "input": {
             "mesh": job.mesh,
