@@ -24,7 +24,8 @@ import traceback
 from collections.abc import Sequence
 
 from arapkit import __version__
-from arapkit.errors import InputError, worded_for
+from arapkit.errors import InputError
+from arapkit.workflows.jobs import error_message
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
@@ -113,14 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return int(args._run(args) or 0)
-    except InputError as e:
-        return _fail(worded_for(e.args[0] if e.args else e, "cli"), 2)
-    except FileNotFoundError as e:
-        return _fail(f"{e.filename}: file not found", 2)
-    except IsADirectoryError as e:
-        return _fail(f"{e.filename}: is a folder, expected a file", 2)
-    except PermissionError as e:
-        return _fail(f"{e.filename}: permission denied", 2)
+    except (InputError, FileNotFoundError, IsADirectoryError, PermissionError) as e:
+        return _fail(error_message(e), 2)
     except KeyboardInterrupt:
         print("arapkit: interrupted", file=sys.stderr)
         return 130
@@ -132,4 +127,4 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     except Exception as e:
         traceback.print_exc()
-        return _fail(f"internal error ({type(e).__name__}: {e}); please report this", 1)
+        return _fail(error_message(e), 1)
