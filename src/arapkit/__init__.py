@@ -22,20 +22,6 @@ import os as _os
 # starts its OpenMP pool (at the first parallel call); an explicit user setting wins.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
-
-def _installed_version() -> str:
-    # the one source is pyproject.toml, read back from the installed package's metadata
-    from importlib.metadata import PackageNotFoundError, version
-
-    try:
-        return version("arapkit")
-    except PackageNotFoundError:  # a source tree that was never installed
-        return "0+unknown"
-
-
-__version__ = _installed_version()
-del _installed_version
-
 from . import _compat  # noqa: E402
 from .errors import InputError  # noqa: E402
 from .io.fileio import save_mesh
@@ -58,6 +44,20 @@ from .mesh.model import Mesh, load_mesh
 from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .methods.deformer import Deformer, Result
 from .methods.laplacian import LaplacianEditor, laplacian_edit
+
+
+def _installed_version() -> str:
+    # the one source is pyproject.toml, read back from the installed package's metadata
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("arapkit")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "0+unknown"
+
+
+__version__ = _installed_version()
+del _installed_version
 
 # the public names: classes, then functions (submodules such as arapkit.plots.figures are public
 # too)
