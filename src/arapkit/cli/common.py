@@ -10,7 +10,6 @@ from collections.abc import Callable
 from typing import Any
 
 from arapkit import validate
-from arapkit.arap.rings import rings_summary  # noqa: F401 - re-exported for the commands
 from arapkit.errors import InputError
 
 __all__ = [
