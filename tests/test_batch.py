@@ -227,13 +227,13 @@ def test_rerun_skips_and_no_resume_redoes(data, cluster):
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.xyz"}',
          ":3: x.xyz: unsupported mesh format"),
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.ply", "rings": 0}',
-         ":3: 'rings' must be an integer >= 1, got 0"),
+         ":3: 'rings': must be at least 1, got 0"),
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.ply", "energy": "sr"}',
          ":3: energy sr is not available in this build"),
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.ply", "rings": 2, '
          '"rings_file": "r.txt"}', ":3: give 'rings' or 'rings_file', not both"),
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.ply", "tol": -1}',
-         ":3: 'tol' must be a positive number"),
+         ":3: 'tol': must be at least 0, got -1"),
     ],
 )
 def test_malformed_job_file_exit_2_writes_nothing(data, capsys, line, message):
@@ -275,6 +275,44 @@ def test_library_run_returns_summary_rows(data, cluster, monkeypatch):
     report = json.loads((folder / "lib" / "json3.ply.json").read_text())
     assert report["batch"]["job"]["mesh"] == str(folder / "bar.off")
     assert report["command"][:3] == ["arapkit", "deform", str(folder / "bar.off")]
+
+
+def test_jobs_follow_the_library_rules_and_defaults(tmp_path, capsys):
+    """A job field takes the rule and the default of the library parameter it sets."""
+    from arapkit import Deformer, InputError
+    from arapkit.mesh.shapes import bar_bend
+    from arapkit.methods.deformer import INITS
+    from arapkit.validate import MAX_ITER_LIMIT, MAX_RINGS
+    from arapkit.workflows.batch import job_spec, normalise_job
+
+    base = {"mesh": "/m.off", "handles": "/h.json", "output": "a.ply"}
+    m = bar(segments=(7, 1, 1))
+    h, _ = bar_bend(m, 30)
+    # tol = 0 (run to max_iter) is a valid tolerance for both
+    assert normalise_job({**base, "tol": 0})["tol"] == 0.0
+    assert Deformer(m, h, tol=0).tol == 0.0
+    # r and max_iter above the library's caps: refused by the job, deform and the API alike
+    for key, flag, value in (("rings", "--rings", MAX_RINGS + 1),
+                             ("max_iter", "--max-iter", MAX_ITER_LIMIT + 1)):
+        rule = f"must be at most {value - 1}, got {value}"
+        with pytest.raises(InputError) as job_error:
+            normalise_job({**base, key: value})
+        assert str(job_error.value) == f"job: '{key}': {rule}"
+        assert main(["deform", "/m.off", "-H", "/h.json", "-o", str(tmp_path / "o.ply"),
+                     flag, str(value)]) == 2
+        assert rule in capsys.readouterr().err
+        # the API names the same limit (per vertex for a rigidity map)
+        api_rule = f"r must be 1..{MAX_RINGS}" if key == "rings" else rule
+        with pytest.raises(InputError, match=api_rule.replace(".", r"\.")):
+            Deformer(m, h, **{key: value})
+    with pytest.raises(InputError, match=f"'init' must be {' or '.join(INITS)}"):
+        normalise_job({**base, "init": "random"})
+    # a job that leaves everything out solves with the Deformer's own defaults
+    spec = job_spec(normalise_job(base))
+    deformer = Deformer(m, h)
+    assert (spec.tol, spec.max_iter, spec.init, spec.energy, spec.accelerate) == (
+        deformer.tol, deformer.max_iter, deformer.init, deformer.energy, deformer.accelerate)
+    assert spec.weights == deformer.weights_kind and spec.rings == int(deformer.rings[0])
 
 
 def test_job_hash_follows_parameters_and_input_files(tmp_path):

@@ -90,6 +90,16 @@ def test_version_and_help_with_examples():
     assert none.returncode == 2 and "usage" in none.stderr
 
 
+def test_version_has_one_source():
+    """``arapkit.__version__``, ``--version`` and reports all read the package metadata."""
+    from importlib.metadata import version
+
+    import arapkit as package
+
+    assert package.__version__ == version("arapkit")
+    assert arapkit("--version").stdout.strip() == f"arapkit {package.__version__}"
+
+
 # --------------------------------------------------------------------------- deform
 
 

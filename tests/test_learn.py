@@ -117,7 +117,7 @@ def test_energies_match_brute_force_on_panda(weights):
 
 
 def test_example_batches_give_the_same_table(limb, monkeypatch):
-    import arapkit.learn.fit as learn
+    import arapkit.learn.energies as learn
 
     mesh, frames = limb
     whole = ring_energies(mesh, frames, 2, 5, per_example=True)

@@ -45,7 +45,19 @@ from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .methods.deformer import Deformer, Result
 from .methods.laplacian import LaplacianEditor, laplacian_edit
 
-__version__ = "0.1.0"
+
+def _installed_version() -> str:
+    # the one source is pyproject.toml, read back from the installed package's metadata
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("arapkit")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "0+unknown"
+
+
+__version__ = _installed_version()
+del _installed_version
 
 # the public names: classes, then functions (submodules such as arapkit.plots.figures are public
 # too)

@@ -74,7 +74,7 @@ def _jobs(args: argparse.Namespace):
             raise InputError(f"give one job file (got {len(args.inputs)}); meshes are inputs "
                              "only with --augment N")
         return args.inputs[0]
-    from arapkit.cli.learn import expand_frames
+    from arapkit.workflows.learning import expand_frames
 
     meshes = expand_frames(args.inputs)
     bad = [m for m in meshes if m.lower().endswith((".jsonl", ".json", ".npz"))]

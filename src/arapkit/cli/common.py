@@ -10,7 +10,6 @@ from collections.abc import Callable
 from typing import Any
 
 from arapkit import validate
-from arapkit.arap.rings import rings_summary  # noqa: F401 - re-exported for the commands
 from arapkit.errors import InputError
 
 __all__ = [
@@ -18,7 +17,6 @@ __all__ = [
     "add_weld_option",
     "add_view_options",
     "iteration_cap",
-    "load_mesh_checked",
     "maybe_weld",
     "note",
     "port",
@@ -100,14 +98,6 @@ def add_view_options(parser: argparse.ArgumentParser) -> None:
         help=f"axis pointing up in the figures: {', '.join(AXES)}; write a negative one as "
         "--up=-y (default: guessed; arapkit info prints the guess)",
     )
-
-
-def load_mesh_checked(path: str):
-    """:func:`arapkit.load_mesh` (kept for callers of this name: it now refuses every bad
-    file with an :class:`InputError` itself)."""
-    from arapkit import load_mesh
-
-    return load_mesh(path)
 
 
 def weld_tolerance(text: str) -> float:

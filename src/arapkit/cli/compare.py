@@ -165,8 +165,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _dry_run(args: argparse.Namespace, mesh, hs, out: Path) -> int:
     """What ``deform --dry-run`` shows, for the comparison's handles; solves nothing."""
-    from arapkit.cli.deform import describe_groups
     from arapkit.plots.figures import groups_figure, save_figure
+    from arapkit.workflows.jobs import describe_groups
 
     print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices)")
     print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")

@@ -360,8 +360,10 @@ def _method_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
+    from arapkit.workflows.jobs import describe_rings
+
     if args.energy == "rring":
-        return f"r = {_describe_rings(r)}"
+        return f"r = {describe_rings(r)}"
     opts = _method_options(args)
     if args.energy == "sr-arap":
         return f"SR-ARAP, alpha = {opts['sr_alpha']:g}"
@@ -370,36 +372,10 @@ def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
     return args.energy
 
 
-def describe_groups(vertices: np.ndarray, hs) -> list[str]:
-    """One line per handle group: name, vertex count, motion (what ``--dry-run`` prints).
-
-    Examples
-    --------
-    >>> from arapkit.io.handles import parse_handles
-    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
-    >>> hs = parse_handles([{"name": "a", "indices": [0]},
-    ...                     {"name": "b", "indices": [2], "translate": [0, 1, 0]}], V)
-    >>> print(chr(10).join(describe_groups(V, hs)))
-    a: 1 vertex, fixed
-    b: 1 vertex, moved: mean displacement [0, 1, 0], largest 1
-    """
-    lines = []
-    for g in hs.groups:
-        n = len(g.indices)
-        head = f"{g.name}: {n} vertex" if n == 1 else f"{g.name}: {n} vertices"
-        d = np.asarray(g.targets) - vertices[g.indices]
-        if g.kind == "fixed" or not np.any(d):
-            lines.append(f"{head}, fixed")
-            continue
-        mean = ", ".join(f"{x:.4g}" for x in d.mean(axis=0) + 0.0)
-        big = float(np.linalg.norm(d, axis=1).max())
-        lines.append(f"{head}, moved: mean displacement [{mean}], largest {big:.4g}")
-    return lines
-
-
 def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
     """Print what the handle file selects and how it moves it; draw it; solve nothing."""
     from arapkit.mesh.orientation import bounding_box
+    from arapkit.workflows.jobs import describe_groups, describe_rings
 
     box = bounding_box(mesh.vertices)
     print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices, box min "
@@ -407,8 +383,7 @@ def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
     print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
     for line in describe_groups(mesh.vertices, hs):
         print(f"  {line}")
-    r = np.broadcast_to(np.asarray(rings), (mesh.n_vertices,))
-    print(f"rings: r = {_describe_rings(r)}; dry run: nothing solved, no mesh written")
+    print(f"rings: r = {describe_rings(rings)}; dry run: nothing solved, no mesh written")
     if args.figure:
         from arapkit.plots.figures import groups_figure, save_figure
 
@@ -422,11 +397,6 @@ def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
 
 def _vec(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
-
-
-def _describe_rings(r: np.ndarray) -> str:
-    lo, hi = int(r.min()), int(r.max())
-    return str(lo) if lo == hi else f"{lo}..{hi}"
 
 
 def _print_summary(args, mesh, hs, res, wall: float) -> None:

@@ -16,7 +16,8 @@ from typing import Any
 
 import numpy as np
 
-from arapkit.cli.common import add_example_epilog, load_mesh_checked
+from arapkit.cli.common import add_example_epilog
+from arapkit.mesh.model import load_mesh
 
 __all__ = ["add_parser", "inspect_mesh", "run"]
 
@@ -173,7 +174,7 @@ def _advice(f: dict[str, Any]) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit info``; returns the exit status."""
-    facts = inspect_mesh(load_mesh_checked(args.mesh))
+    facts = inspect_mesh(load_mesh(args.mesh))
     facts["file"] = args.mesh
     if args.json:
         from arapkit.io.fileio import to_jsonable

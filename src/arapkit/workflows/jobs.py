@@ -27,22 +27,36 @@ Examples
 
 from __future__ import annotations
 
+import inspect
 import os
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import MISSING, dataclass, field, fields
 from typing import Any
 
 import numpy as np
 
+from .. import __version__
 from ..arap.energies.base import ENERGIES
-from ..errors import Advice, InputError
-from ..mesh.weights import DEFAULT_WEIGHTS
+from ..errors import Advice, InputError, worded_for
+from ..methods.deformer import Deformer
 
-__all__ = ["DEFAULT_ENERGY", "ENERGIES", "DeformJob", "JobInputs", "PreparedJob", "job_report",
-           "load_job_inputs", "method_description", "prepare_job", "save_result"]
+__all__ = ["DEFAULT_ENERGY", "ENERGIES", "JOB_DEFAULTS", "DeformJob", "JobInputs", "PreparedJob",
+           "describe_groups", "describe_rings", "error_message", "job_report", "load_job_inputs",
+           "method_description", "prepare_job", "save_result"]
 
+
+def _solver_defaults() -> dict[str, Any]:
+    """The :class:`arapkit.Deformer`'s own defaults: a job that leaves a parameter out
+    solves as the library does, with no second copy of the values to drift."""
+    params = inspect.signature(Deformer.__init__).parameters
+    names = ("rings", "weights", "energy", "sr_alpha", "nodes", "tol", "max_iter", "init",
+             "accelerate")
+    return {name: params[name].default for name in names}
+
+
+_SOLVER = _solver_defaults()
 #: r-ring ARAP, the default method (one of :data:`ENERGIES`, the methods this build can run)
-DEFAULT_ENERGY = ENERGIES[0]
+DEFAULT_ENERGY: str = _SOLVER["energy"]
 
 
 @dataclass
@@ -80,16 +94,16 @@ class DeformJob:
     mesh: str
     handles: str | list | dict
     transform: str | None = None
-    rings: int = 1
+    rings: int = _SOLVER["rings"]
     rings_file: str | None = None
-    weights: str = DEFAULT_WEIGHTS
-    tol: float = 1e-3
-    max_iter: int = 1000
-    init: str = "identity"
-    accelerate: bool = False
+    weights: str = _SOLVER["weights"]
+    tol: float = _SOLVER["tol"]
+    max_iter: int = _SOLVER["max_iter"]
+    init: str = _SOLVER["init"]
+    accelerate: bool = _SOLVER["accelerate"]
     energy: str = DEFAULT_ENERGY
-    sr_alpha: float | None = None
-    nodes: int | None = None
+    sr_alpha: float | None = _SOLVER["sr_alpha"]
+    nodes: int | None = _SOLVER["nodes"]
     weld: float | None = None
     volumetric: bool = False
     interior_density: float | None = None
@@ -103,6 +117,11 @@ class DeformJob:
                 # the .def beside the .sel is read when no transform is named
                 files.append(os.path.splitext(os.fspath(self.handles))[0] + ".def")
         return [os.fspath(f) for f in files if f is not None]
+
+
+#: every optional parameter of :class:`DeformJob` and its default (the library's own)
+JOB_DEFAULTS: dict[str, Any] = {f.name: f.default for f in fields(DeformJob)
+                                if f.default is not MISSING}
 
 
 @dataclass
@@ -217,8 +236,6 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
     InputError
         Any bad input, with a one-line message naming the file.
     """
-    from ..methods.deformer import Deformer
-
     inputs = load_job_inputs(job, note)
     deformer = Deformer(
         inputs.mesh,
@@ -293,12 +310,11 @@ def job_report(
 ) -> dict[str, Any]:
     """The JSON report of a solved job: inputs, parameters, handles, result, timings."""
     from ..arap.rings import rings_summary
-    from ..cli import _version
 
     mesh, hs = prepared.mesh, prepared.handles
     r = prepared.rings
     return {
-        "arapkit_version": _version(),
+        "arapkit_version": __version__,
         "command": command,
         "input": {
             "mesh": job.mesh,
@@ -349,3 +365,67 @@ def job_report(
         "timings": {**res.timings, "wall_s": wall_s},
         "outputs": dict(outputs or {}),
     }
+
+
+def describe_groups(vertices: np.ndarray, hs) -> list[str]:
+    """One line per handle group: name, vertex count, motion (what a dry run prints).
+
+    Examples
+    --------
+    >>> from arapkit.io.handles import parse_handles
+    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
+    >>> hs = parse_handles([{"name": "a", "indices": [0]},
+    ...                     {"name": "b", "indices": [2], "translate": [0, 1, 0]}], V)
+    >>> print(chr(10).join(describe_groups(V, hs)))
+    a: 1 vertex, fixed
+    b: 1 vertex, moved: mean displacement [0, 1, 0], largest 1
+    """
+    lines = []
+    for g in hs.groups:
+        n = len(g.indices)
+        head = f"{g.name}: {n} vertex" if n == 1 else f"{g.name}: {n} vertices"
+        d = np.asarray(g.targets) - vertices[g.indices]
+        if g.kind == "fixed" or not np.any(d):
+            lines.append(f"{head}, fixed")
+            continue
+        mean = ", ".join(f"{x:.4g}" for x in d.mean(axis=0) + 0.0)
+        big = float(np.linalg.norm(d, axis=1).max())
+        lines.append(f"{head}, moved: mean displacement [{mean}], largest {big:.4g}")
+    return lines
+
+
+def describe_rings(rings: np.ndarray) -> str:
+    """A rigidity map in a few characters: ``3`` when uniform, ``1..6`` otherwise.
+
+    Examples
+    --------
+    >>> describe_rings(np.array([2, 2])), describe_rings(np.array([1, 4, 2]))
+    ('2', '1..4')
+    """
+    lo, hi = int(np.min(rings)), int(np.max(rings))
+    return str(lo) if lo == hi else f"{lo}..{hi}"
+
+
+def error_message(exc: BaseException) -> str:
+    """The one line ``arapkit`` prints for ``exc``: bad input, a missing or unreadable
+    file, or (for anything else) an internal error to report.
+
+    Examples
+    --------
+    >>> error_message(InputError("m.off: not a mesh"))
+    'm.off: not a mesh'
+    >>> error_message(FileNotFoundError(2, "No such file", "h.json"))
+    'h.json: file not found'
+    """
+    if isinstance(exc, InputError):
+        msg = worded_for(exc.args[0] if exc.args else exc, "cli")
+    elif isinstance(exc, FileNotFoundError):
+        msg = f"{exc.filename}: file not found"
+    elif isinstance(exc, IsADirectoryError):
+        msg = f"{exc.filename}: is a folder, expected a file"
+    elif isinstance(exc, PermissionError):
+        msg = f"{exc.filename}: permission denied"
+    else:
+        msg = f"internal error ({type(exc).__name__}: {exc}); please report this"
+    # a message may carry file content with newlines, which would break the one line
+    return " ".join(str(msg).split())
