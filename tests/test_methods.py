@@ -16,7 +16,7 @@ from conftest import data_path
 from arapkit import Deformer, InputError, Mesh, load_mesh
 from arapkit.arap.problem import ARAPProblem
 from arapkit.mesh.shapes import bar, bar_bend
-from arapkit.mesh.weights import _corner_cotangents, edge_weights
+from arapkit.mesh.weights import corner_cotangents, edge_weights
 
 CGAL_DRIVER = r"""
 // Test oracle: CGAL's Surface_mesh_deformation on the whole mesh with given handles.
@@ -96,7 +96,7 @@ def cylinder():
 def brute_spokes_rims_energy(m: Mesh, P, R) -> float:
     """Chao et al.'s energy, triangle by triangle with half cotangents (libigl's form)."""
     V, F = m.vertices, m.faces
-    cots = _corner_cotangents(V, F)
+    cots = corner_cotangents(V, F)
     E = 0.0
     for t, f in enumerate(F):
         for c in range(3):
@@ -185,7 +185,7 @@ def test_sr_arap_matches_cgal(cgal_driver, cylinder, tmp_path, alpha):
     m, h, T = cylinder
     # CGAL clamps negative cotangents to 0; on this mesh none is negative, so its weights
     # are exactly arapkit's "cotan"
-    assert _corner_cotangents(m.vertices, m.faces).min() >= 0
+    assert corner_cotangents(m.vertices, m.faces).min() >= 0
     U = run_cgal(cgal_driver, data_path("meshes", "cylinder.off"), h, T, "sre", alpha, tmp_path)
     res = Deformer(m, h, weights="cotan", energy="sr-arap", sr_alpha=alpha).solve(
         T, tol=1e-12, max_iter=20000)
@@ -314,7 +314,7 @@ def cli(*args):
 def bar_case(tmp_path_factory):
     import json
 
-    from arapkit.io.fileio import save_mesh
+    from arapkit.io import save_mesh
 
     d = tmp_path_factory.mktemp("methods")
     m = bar()

@@ -13,9 +13,8 @@ import pytest
 from conftest import data_path
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.io.fileio import read_ply_vertex_properties, save_mesh
-from arapkit.mesh.model import weld
-from arapkit.mesh.welding import soup_facts, to_source, weld_handles, weld_values
+from arapkit.io import read_ply_vertex_properties, save_mesh
+from arapkit.mesh.welding import soup_facts, to_source, weld, weld_handles, weld_values
 
 
 def arapkit(*args) -> subprocess.CompletedProcess:

@@ -97,7 +97,7 @@ def _slug(label: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit compare``; returns the exit status."""
-    from arapkit.io.fileio import save_mesh
+    from arapkit.io import save_mesh
     from arapkit.methods.deformer import check_method
     from arapkit.plots.figures import save_figure
     from arapkit.workflows.compare import (

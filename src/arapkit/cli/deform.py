@@ -207,7 +207,7 @@ def _add_volume_options(p: argparse.ArgumentParser) -> None:
 
 def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None:
     """Refuse volume options without --volumetric, a missing mesher, a bad volume path."""
-    from arapkit.io.fileio import check_output_path
+    from arapkit.io import check_output_path
     from arapkit.methods.volumetric import MESHER_HINT, VOLUME_FORMATS, have_mesher
 
     if not args.volumetric:
@@ -229,7 +229,7 @@ def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Fail fast, before loading or solving, on any output that cannot be written."""
-    from arapkit.io.fileio import check_figure_format, check_output_path, mesh_format
+    from arapkit.io import check_figure_format, check_output_path, mesh_format
 
     inputs = [args.mesh, args.handles, args.transform, args.rings_file]
     outs = []
@@ -278,7 +278,7 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit deform``; returns the exit status."""
-    from arapkit.io.fileio import write_json
+    from arapkit.io import write_json
     from arapkit.workflows.jobs import job_report, load_job_inputs, prepare_job, save_result
 
     t0 = time.perf_counter()
@@ -344,7 +344,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report == "-":
         import json
 
-        from arapkit.io.fileio import to_jsonable
+        from arapkit.io import to_jsonable
 
         print(json.dumps(to_jsonable(report), indent=2))
     else:
@@ -374,7 +374,7 @@ def describe_groups(vertices: np.ndarray, hs) -> list[str]:
 
     Examples
     --------
-    >>> from arapkit.io.handles import parse_handles
+    >>> from arapkit.io import parse_handles
     >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
     >>> hs = parse_handles([{"name": "a", "indices": [0]},
     ...                     {"name": "b", "indices": [2], "translate": [0, 1, 0]}], V)

@@ -176,7 +176,7 @@ def run(args: argparse.Namespace) -> int:
     facts = inspect_mesh(load_mesh_checked(args.mesh))
     facts["file"] = args.mesh
     if args.json:
-        from arapkit.io.fileio import to_jsonable
+        from arapkit.io import to_jsonable
 
         print(json.dumps(to_jsonable(facts), indent=2))
         return 0

@@ -39,7 +39,7 @@ from arapkit.cli.common import (
     positive_int,
 )
 from arapkit.errors import InputError
-from arapkit.io.fileio import load_numpy
+from arapkit.io import load_numpy
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 from arapkit.validate import real_array
 
@@ -296,7 +296,7 @@ def _check_connectivity(frames: Frames, ref: int) -> None:
 
 def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """Fail before any work on an output that cannot be written."""
-    from arapkit.io.fileio import check_figure_format, check_output_path, mesh_format
+    from arapkit.io import check_figure_format, check_output_path, mesh_format
 
     if args.output.lower().endswith((".ply", ".ply.gz")):
         raise InputError(f"{args.output}: the rigidity map is text or .npy; "
@@ -384,19 +384,19 @@ def _learn(args, frames: Frames, ref: int):
 
 
 def _write(args, reference, res) -> None:
-    from arapkit.io.handles import save_rings
+    from arapkit.io import save_rings
     from arapkit.mesh.welding import to_source
 
     # a welded reference: the map is written for the input's own vertices
     save_rings(args.output, to_source(reference, res.rings))
     if args.ply:
-        from arapkit.io.fileio import save_mesh
+        from arapkit.io import save_mesh
 
         for line in save_mesh(args.ply, reference.vertices, like=reference,
                               vertex_properties={"rings": res.rings.astype(np.int32)}):
             _warn(line)
     if args.energies:
-        from arapkit.io.fileio import atomic_open
+        from arapkit.io import atomic_open
 
         energies = to_source(reference, res.energies)
         with atomic_open(args.energies, "wb") as f:

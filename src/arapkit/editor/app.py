@@ -894,7 +894,7 @@ class EditorApp:
 
     def load_rings_bytes(self, name: str, data: bytes) -> np.ndarray:
         """Use an uploaded rigidity map (text, .npy or PLY with ``rings``); undoable."""
-        from arapkit.io.handles import load_rings
+        from arapkit.io import load_rings
 
         self._check_upload(name, data, "rings files")
         with self.lock:
@@ -948,7 +948,7 @@ class EditorApp:
         A mesh that came from an upload has no file of its own, so its rest shape is
         saved next to the session first and the session names that file.
         """
-        from arapkit.io.fileio import save_mesh
+        from arapkit.io import save_mesh
 
         with self.lock:
             out = self._ensure_export_dir()
@@ -966,8 +966,7 @@ class EditorApp:
         Everything the mesh's file carried comes along (``save_mesh(like=...)``); a mesh
         loaded from OBJ is also exported as OBJ, which keeps its UVs and materials.
         """
-        from arapkit.io.fileio import save_mesh
-        from arapkit.io.handles import save_rings
+        from arapkit.io import save_mesh, save_rings
 
         with self.lock:
             out = self._ensure_export_dir()

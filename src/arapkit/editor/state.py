@@ -562,7 +562,7 @@ class EditorState:
         return True
 
     def add_handle_set(self, handle_set: Any, record: bool = True) -> list[Handle]:
-        """Add the groups of an :class:`arapkit.io.handles.HandleSet` (e.g. ``--handles``).
+        """Add the groups of an :class:`arapkit.mesh.selection.HandleSet` (e.g. ``--handles``).
 
         A group's targets become the new handle's anchor, so its gizmo starts where the
         file put it; ``fixed`` groups come in frozen.
@@ -706,7 +706,7 @@ class EditorState:
 
     def save_session(self, path: str | os.PathLike[str]) -> Path:
         """Write the session as JSON (atomically: a crash never leaves half a file)."""
-        from arapkit.io.fileio import write_json
+        from arapkit.io import write_json
 
         path = Path(path)
         write_json(path, self.to_dict(), indent=1)

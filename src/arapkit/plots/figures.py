@@ -671,7 +671,7 @@ def save_figure(fig: Figure, path: str | os.PathLike, dpi: int | None = None) ->
     b'\\x89PNG'
     """
     from arapkit.errors import InputError
-    from arapkit.io.fileio import atomic_open, check_figure_format
+    from arapkit.io import atomic_open, check_figure_format
 
     try:
         fmt = check_figure_format(path)

@@ -19,7 +19,7 @@ modification times, is ``skipped``.
 Examples
 --------
 >>> import tempfile, pathlib, json
->>> from arapkit.io.fileio import save_mesh
+>>> from arapkit.io import save_mesh
 >>> from arapkit.mesh.shapes import bar
 >>> d = pathlib.Path(tempfile.mkdtemp())
 >>> m = bar()
@@ -52,6 +52,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError, worded_for
+from ..mesh.model import bounding_box_diagonal
 from ..mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 from ..methods.deformer import check_method
 from ..validate import read_input
@@ -146,7 +147,7 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
     ...
     arapkit.errors.InputError: job: unknown key 'r' (known: mesh, handles, transform, ...)
     """
-    from ..io.fileio import mesh_format
+    from ..io import mesh_format
 
     if not isinstance(obj, dict):
         raise InputError(f"{where}: a job must be a JSON object, got {type(obj).__name__}")
@@ -251,7 +252,7 @@ def dry_run(path: str | os.PathLike) -> list[str]:
 
 def _check_outdir(outdir: Path) -> None:
     """Create OUTDIR and prove it writable before any cluster starts or job runs."""
-    from ..io.fileio import check_output_path
+    from ..io import check_output_path
 
     if outdir.exists() and not outdir.is_dir():
         raise InputError(f"{outdir}: output folder is a file")
@@ -311,7 +312,7 @@ enclosed in double quotes at column 2)
 
 def write_jobs(path: str | os.PathLike, jobs: Iterable[dict]) -> None:
     """Write jobs as JSON Lines, atomically."""
-    from ..io.fileio import atomic_write, to_jsonable
+    from ..io import atomic_write, to_jsonable
 
     atomic_write(path, "".join(json.dumps(to_jsonable(j)) + "\n" for j in jobs))
 
@@ -441,7 +442,7 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
     dict
         One summary row (keys :data:`SUMMARY_COLUMNS`).
     """
-    from ..io.fileio import write_json
+    from ..io import write_json
     from .jobs import job_report, prepare_job, save_result
 
     t0 = time.perf_counter()
@@ -531,7 +532,7 @@ class _Progress:
 
 def write_summary(path: str | os.PathLike, rows: Sequence[dict]) -> None:
     """``summary.csv`` with :data:`SUMMARY_COLUMNS`, atomically."""
-    from ..io.fileio import atomic_write
+    from ..io import atomic_write
 
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")
@@ -724,7 +725,7 @@ def augment_jobs(meshes: Sequence[str | os.PathLike], n: int, seed: int = 0,
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> from arapkit.io.fileio import save_mesh
+    >>> from arapkit.io import save_mesh
     >>> from arapkit.mesh.shapes import bar
     >>> p = pathlib.Path(tempfile.mkdtemp()) / "bar.off"
     >>> m = bar(); _ = save_mesh(p, m.vertices, m.faces)
@@ -748,7 +749,7 @@ def augment_jobs(meshes: Sequence[str | os.PathLike], n: int, seed: int = 0,
         nv = len(V)
         if nv < 2:
             raise InputError(f"{path}: needs at least two vertices to place handles")
-        diag = float(np.linalg.norm(V.max(0) - V.min(0)))
+        diag = bounding_box_diagonal(V)
         rng = np.random.default_rng([int(seed), zlib.crc32(name.encode())])
         for s in range(n):
             a = int(rng.integers(nv))
