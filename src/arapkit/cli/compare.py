@@ -25,6 +25,7 @@ from arapkit.cli.common import (
     warn,
 )
 from arapkit.errors import InputError
+from arapkit.io.formats import readable_formats
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
@@ -44,7 +45,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             "arapkit compare bar.off --handles bar.json --rings-file r.txt -o cmp",
         ]),
     )
-    p.add_argument("mesh", metavar="MESH", help="input mesh (OFF, OBJ, PLY, STL; may be .gz)")
+    p.add_argument("mesh", metavar="MESH", help=f"input mesh ({readable_formats()}; may be .gz)")
     p.add_argument("--handles", "-H", required=True, metavar="FILE",
                    help="handle groups (.json) or a per-vertex status file (.sel)")
     p.add_argument("--transform", "-T", metavar="FILE",

@@ -30,6 +30,7 @@ from arapkit.cli.common import (
     warn,
 )
 from arapkit.errors import InputError, worded_for
+from arapkit.io.formats import readable_formats
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
@@ -56,7 +57,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "stdout; progress and notes go to stderr.",
         **add_example_epilog(EXAMPLES),
     )
-    p.add_argument("mesh", metavar="MESH", help="input mesh (OFF, OBJ, PLY, STL; may be .gz)")
+    p.add_argument("mesh", metavar="MESH", help=f"input mesh ({readable_formats()}; may be .gz)")
     p.add_argument(
         "--handles",
         "-H",

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from arapkit.cli.common import add_example_epilog, load_mesh_checked
+from arapkit.io.formats import readable_formats
 
 __all__ = ["add_parser", "inspect_mesh", "run"]
 
@@ -41,7 +42,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             ["arapkit info examples/cactus.off", "arapkit info scan.ply.gz --json"]
         ),
     )
-    p.add_argument("mesh", metavar="MESH", help="mesh file (OFF, OBJ, PLY, STL; may be .gz)")
+    p.add_argument("mesh", metavar="MESH", help=f"mesh file ({readable_formats()}; may be .gz)")
     p.add_argument("--json", action="store_true", help="print the facts as one JSON object")
     return p
 

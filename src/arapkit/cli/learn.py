@@ -39,7 +39,7 @@ from arapkit.cli.common import (
     positive_int,
 )
 from arapkit.errors import InputError
-from arapkit.io import load_numpy
+from arapkit.io import is_readable_mesh, load_numpy, readable_formats
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 from arapkit.validate import real_array
 
@@ -53,7 +53,6 @@ EXAMPLES = [
     "arapkit deform examples/finger.off --handles examples/handles/rotate-limb.json "
     "--rings-file rings.txt -o out.ply",
 ]
-_MESH_SUFFIXES = (".off", ".obj", ".ply", ".stl")
 _GLOB_CHARS = re.compile(r"[*?\[]")
 
 
@@ -90,7 +89,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "frames",
         nargs="+",
         metavar="FRAMES",
-        help="mesh files (OFF, OBJ, PLY, STL), globs, folders of meshes, or .npz files with "
+        help=f"mesh files ({readable_formats()}), globs, folders of meshes, or .npz files with "
         "V (frames x vertices x 3) and F; each .npz, folder or glob is one sequence",
     )
     p.add_argument("-o", "--output", required=True, metavar="OUT",
@@ -152,11 +151,6 @@ def _natural_key(path: str) -> list:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path)]
 
 
-def _is_mesh_file(name: str) -> bool:
-    low = name.lower()
-    return low.endswith(_MESH_SUFFIXES) or low.endswith(tuple(s + ".gz" for s in _MESH_SUFFIXES))
-
-
 def expand_frames(items: list[str]) -> list[str]:
     """Files named by ``items``: files as given, folders and globs expanded in natural order.
 
@@ -170,10 +164,10 @@ def expand_frames(items: list[str]) -> list[str]:
     paths: list[str] = []
     for item in items:
         if os.path.isdir(item):
-            found = sorted((os.path.join(item, f) for f in os.listdir(item) if _is_mesh_file(f)),
+            found = sorted((os.path.join(item, f) for f in os.listdir(item) if is_readable_mesh(f)),
                            key=_natural_key)
             if not found:
-                raise InputError(f"{item}: folder holds no mesh files (OFF, OBJ, PLY, STL)")
+                raise InputError(f"{item}: folder holds no mesh files ({readable_formats()})")
             paths += found
         elif not os.path.exists(item) and _GLOB_CHARS.search(item):
             found = sorted((f for f in glob.glob(item) if os.path.isfile(f)), key=_natural_key)

@@ -28,7 +28,16 @@ _INTEGER = re.compile(r"[+-]?[0-9]+")
 
 def text_tokens(path: Path, what: str) -> Iterator[tuple[int, str]]:
     """(line number, token) for the whitespace-separated tokens of a text file, skipping
-    ``#`` comments; lines are read one at a time, so a long file is never split at once."""
+    ``#`` comments; lines are read one at a time, so a long file is never split at once.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.def"
+    >>> _ = p.write_text("1 0  # first row\\n2\\n")
+    >>> list(text_tokens(p, ".def files"))
+    [(1, '1'), (1, '0'), (2, '2')]
+    """
     for number, line in enumerate(io.StringIO(read_text(path, what)), start=1):
         for token in line.split("#", 1)[0].split():
             yield number, token
@@ -61,7 +70,18 @@ def int_tokens(path: Path, what: str, kind: str, expected: int | None = None,
 
 
 def read_text(path: Path, what: str) -> str:
-    """A capped text input file (:func:`arapkit.validate.read_input`), decoded."""
+    """A capped text input file (:func:`arapkit.validate.read_input`), decoded.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.sel"
+    >>> _ = p.write_bytes(b"\\xff\\xfe")
+    >>> read_text(p, ".sel files")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: ...a.sel: not a text file
+    """
     try:
         return read_input(path, what).decode("utf-8")
     except UnicodeDecodeError:

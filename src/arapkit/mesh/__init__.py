@@ -16,6 +16,7 @@ from typing import Any
 
 from .model import (
     COORDINATE_RANGE,
+    EdgeTopology,
     Mesh,
     bounding_box_diagonal,
     check_number_range,
@@ -23,8 +24,8 @@ from .model import (
 )
 from .welding import weld
 
-__all__ = ["COORDINATE_RANGE", "Mesh", "bounding_box_diagonal", "check_number_range",
-           "scale_free_vertices", "weld"]
+__all__ = ["COORDINATE_RANGE", "EdgeTopology", "Mesh", "bounding_box_diagonal",
+           "check_number_range", "scale_free_vertices", "weld"]
 
 #: names the flat ``arapkit.mesh`` module had that now live in a higher layer
 _MOVED_UP = {"load_mesh": "arapkit.io.readers"}
