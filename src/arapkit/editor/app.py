@@ -52,6 +52,8 @@ from arapkit.editor.views import (
 )
 from arapkit.editor.worker import SolveRequest, SolveUpdate, SolveWorker
 from arapkit.errors import InputError
+from arapkit.io.formats import READ_FORMATS, is_readable_mesh, readable_formats
+from arapkit.mesh.model import bounding_box_diagonal
 
 TOOLS = ("Navigate", "Select: click", "Select: rectangle", "Paint brush", "Flood fill")
 VIEWS = ("Shaded", "Rigidity r", "Energy")
@@ -62,7 +64,7 @@ _METHOD_LABELS = {"arap": "r-ring ARAP", "laplacian": "Laplacian editing",
 METHODS = {_METHOD_LABELS.get(m, m): m for m in PANEL_METHODS}
 UP_AXES = {"+z": (0, 0, 1), "+y": (0, 1, 0), "+x": (1, 0, 0),
            "-z": (0, 0, -1), "-y": (0, -1, 0), "-x": (-1, 0, 0)}
-MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
+MESH_SUFFIXES = tuple("." + f for f in READ_FORMATS)
 MAX_R = 10
 HANDLE_RGB, FROZEN_RGB, ACTIVE_RGB, SELECT_RGB = (255, 140, 0), (110, 110, 135), (255, 235, 0), (
     230, 30, 200)
@@ -206,7 +208,7 @@ class EditorApp:
             st = self.state
             V = st.vertices
             lo, hi = V.min(axis=0), V.max(axis=0)
-            self._diag = float(np.linalg.norm(hi - lo)) or 1.0
+            self._diag = bounding_box_diagonal(V) or 1.0
             e = np.asarray(st.mesh.edges)
             self._edge_len = float(np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1).mean())
             self.worker.reset_shape(V, st.mesh)
@@ -884,8 +886,8 @@ class EditorApp:
         from arapkit import load_mesh
 
         self._check_upload(name, data, "meshes")
-        if self._suffix(name).removesuffix(".gz") not in MESH_SUFFIXES:
-            raise InputError(f"{name}: not a mesh file (use OBJ, PLY, OFF or STL)")
+        if not is_readable_mesh(name):
+            raise InputError(f"{name}: not a mesh file (use {readable_formats(' or ')})")
         mesh = self._via_tempfile(name, data, load_mesh)
         mesh.name = safe_stem(name)
         with self.lock:
