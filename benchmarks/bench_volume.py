@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from arapkit import Deformer, load_mesh
-from arapkit.io.handles import load_handles
+from arapkit.io import load_handles
 from arapkit.mesh.shapes import bar, bar_bend
 from arapkit.methods.volumetric import (
     DEFAULT_DENSITY,

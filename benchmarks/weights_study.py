@@ -37,7 +37,7 @@ import scipy.sparse as sp
 
 import arapkit.methods.deformer as solver
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.io.handles import load_handles
+from arapkit.io import load_handles
 from arapkit.mesh.weights import CLAMP_FRACTION, edge_weights
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -28,7 +28,7 @@ def main(argv: list[str]) -> int:
     import matplotlib.pyplot as plt
 
     from arapkit import Deformer, load_mesh
-    from arapkit.io.handles import load_handles
+    from arapkit.io import load_handles
     from arapkit.mesh.orientation import view_frame
     from arapkit.methods.volumetric import VolumetricDeformer, mesh_volume
     from arapkit.plots.figures import render_mesh, save_figure

@@ -30,8 +30,7 @@ from pathlib import Path
 import numpy as np
 import trimesh
 
-from arapkit.io.fileio import save_mesh
-from arapkit.io.handles import save_def, save_rings, save_sel
+from arapkit.io import save_def, save_mesh, save_rings, save_sel
 from arapkit.mesh.shapes import bar, bar_two_materials
 
 HERE = Path(__file__).resolve().parent

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from arapkit import Deformer, load_mesh
-from arapkit.io.fileio import save_mesh
+from arapkit.io import save_mesh
 from arapkit.mesh.attributes import polygon_area_vectors
 
 CUBE_V = np.array(

@@ -24,8 +24,14 @@ import pytest
 from conftest import data_path
 
 from arapkit.cli import main
-from arapkit.io.fileio import read_ply_vertex_properties, save_mesh
-from arapkit.io.handles import parse_handles, save_def, save_rings, save_sel
+from arapkit.io import (
+    parse_handles,
+    read_ply_vertex_properties,
+    save_def,
+    save_mesh,
+    save_rings,
+    save_sel,
+)
 from arapkit.mesh.shapes import bar
 
 HAVE_DASK = importlib.util.find_spec("distributed") is not None

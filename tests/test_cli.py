@@ -19,8 +19,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from arapkit.io.fileio import read_ply_vertex_properties, save_mesh
-from arapkit.io.handles import save_def, save_rings, save_sel
+from arapkit.io import read_ply_vertex_properties, save_def, save_mesh, save_rings, save_sel
 from arapkit.mesh.shapes import bar, bar_bend, bar_two_materials
 
 ROOT = Path(__file__).resolve().parents[1]

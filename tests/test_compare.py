@@ -13,7 +13,7 @@ import pytest
 from conftest import data_path
 
 from arapkit import Deformer, Mesh, load_mesh
-from arapkit.io.fileio import read_ply_vertex_properties
+from arapkit.io import read_ply_vertex_properties
 from arapkit.mesh.quality import folded_edge_fraction, volume_change
 from arapkit.mesh.shapes import bar
 

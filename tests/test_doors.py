@@ -24,8 +24,7 @@ import pytest
 from arapkit import Deformer
 from arapkit.arap.energies.base import CAPABILITIES, ENERGIES, INTERFACES, VOLUMETRIC_INTERFACES
 from arapkit.errors import InputError
-from arapkit.io.handles import load_handles, save_rings
-from arapkit.mesh.model import load_mesh
+from arapkit.io import load_handles, load_mesh, save_rings
 
 ROOT = Path(__file__).resolve().parents[1]
 MESH = ROOT / "examples" / "cactus.off"
@@ -152,7 +151,7 @@ def _library(v: Variant, folder: Path) -> np.ndarray:
 
 
 def _ply(path: Path) -> np.ndarray:
-    from arapkit.io.fileio import read_ply_vertex_properties
+    from arapkit.io import read_ply_vertex_properties
 
     p = read_ply_vertex_properties(path)
     return np.stack([p["x"], p["y"], p["z"]], axis=1)

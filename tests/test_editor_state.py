@@ -223,7 +223,7 @@ def test_drag_is_one_undo_step(st):
 
 
 def test_session_round_trip(st, tmp_path):
-    from arapkit.io.fileio import save_mesh
+    from arapkit.io import save_mesh
 
     mesh_file = tmp_path / "bar.off"
     save_mesh(mesh_file, st.mesh.vertices, st.mesh.faces)
@@ -310,7 +310,7 @@ def test_face_groups_cover_every_face_once(st):
 
 def test_cli_state_reads_handles_and_rings(tmp_path):
     from arapkit.cli.edit import build_state
-    from arapkit.io.handles import save_rings
+    from arapkit.io import save_rings
 
     hfile = tmp_path / "h.json"
     hfile.write_text(json.dumps([

@@ -1,4 +1,4 @@
-"""Handle JSON, .sel/.def and rigidity files (arapkit.io.handles)."""
+"""Handle JSON, .sel/.def and rigidity files (arapkit.io.handles, .seldef, .rigidity)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from arapkit.errors import InputError
-from arapkit.io.fileio import save_mesh
-from arapkit.io.handles import (
+from arapkit.io import (
     HandleGroup,
     HandleSet,
     load_def,
@@ -21,6 +20,7 @@ from arapkit.io.handles import (
     rotation_matrix,
     save_def,
     save_handles,
+    save_mesh,
     save_rings,
     save_sel,
     select_box,

@@ -20,8 +20,7 @@ from arapkit import Deformer, Mesh, cli, validate
 from arapkit.editor.state import EditorState, Handle, SolverSettings
 from arapkit.editor.worker import SolveRequest, SolveWorker
 from arapkit.errors import InputError
-from arapkit.io.fileio import check_output_path, save_mesh
-from arapkit.io.handles import load_handles, load_rings
+from arapkit.io import check_output_path, load_handles, load_rings, save_mesh
 from arapkit.mesh.shapes import bar, bar_bend
 
 # ----------------------------------------------------------------------------- helpers
@@ -117,7 +116,7 @@ def test_huge_targets_stop_the_solve_and_write_nothing(capsys, files, motion):
 
 
 def test_huge_def_transform_names_the_def_file(capsys, files, mesh):
-    from arapkit.io.handles import save_def, save_sel
+    from arapkit.io import save_def, save_sel
 
     tmp, base, tip = files
     save_sel(tmp / "a.sel", mesh.n_vertices, base, tip)
@@ -635,7 +634,7 @@ def test_load_handles_huge_numbers(tmp_path, mesh):
 
 
 def test_sel_status_other_than_0_1_2_is_refused(tmp_path, mesh):
-    from arapkit.io.handles import load_sel
+    from arapkit.io import load_sel
 
     p = tmp_path / "a.sel"
     statuses = ["0"] + ["1"] * (mesh.n_vertices - 2) + ["2"]
@@ -700,7 +699,7 @@ def test_npz_member_damaged_after_a_good_directory(capsys, files, mesh):
 
 
 def test_input_files_over_the_cap_are_refused_in_one_line(capsys, files, mesh, monkeypatch):
-    from arapkit.io.handles import save_def, save_sel
+    from arapkit.io import save_def, save_sel
     from arapkit.workflows.batch import load_jobs
 
     tmp, base, tip = files
@@ -738,7 +737,7 @@ _PEAK = """
 import json, sys, tracemalloc
 import numpy as np
 from arapkit.errors import InputError
-from arapkit.io.handles import load_handles
+from arapkit.io import load_handles
 tracemalloc.start()
 try:
     load_handles(sys.argv[1], np.eye(3))

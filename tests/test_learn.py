@@ -271,8 +271,7 @@ def limb_files(tmp_path, limb):
 
 
 def test_cli_folder_writes_rings_ply_and_figure(tmp_path, limb, limb_files, capsys):
-    from arapkit.io.fileio import read_ply_vertex_properties
-    from arapkit.io.handles import load_rings
+    from arapkit.io import load_rings, read_ply_vertex_properties
 
     mesh, frames = limb
     out, ply, fig = tmp_path / "r.txt", tmp_path / "r.ply", tmp_path / "r.png"

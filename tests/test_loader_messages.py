@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.io.fileio import save_mesh
+from arapkit.io import save_mesh
 from arapkit.mesh.model import COORDINATE_RANGE, check_number_range
 from arapkit.mesh.weights import DEFAULT_WEIGHTS
 

@@ -16,7 +16,7 @@ from conftest import data_path
 from arapkit import Deformer, InputError, Mesh, load_mesh
 from arapkit.arap.problem import ARAPProblem
 from arapkit.mesh.shapes import bar, bar_bend
-from arapkit.mesh.weights import _corner_cotangents, edge_weights
+from arapkit.mesh.weights import corner_cotangents, edge_weights
 
 
 def bend_cylinder(m: Mesh, degrees: float = 60.0):
@@ -44,7 +44,7 @@ def cylinder():
 def brute_spokes_rims_energy(m: Mesh, P, R) -> float:
     """Chao et al.'s energy, triangle by triangle with half cotangents (libigl's form)."""
     V, F = m.vertices, m.faces
-    cots = _corner_cotangents(V, F)
+    cots = corner_cotangents(V, F)
     E = 0.0
     for t, f in enumerate(F):
         for c in range(3):
@@ -116,7 +116,7 @@ def test_sr_arap_matches_cgal(cgal_driver, cylinder, tmp_path, alpha):
     m, h, T = cylinder
     # CGAL clamps negative cotangents to 0; on this mesh none is negative, so its weights
     # are exactly arapkit's "cotan"
-    assert _corner_cotangents(m.vertices, m.faces).min() >= 0
+    assert corner_cotangents(m.vertices, m.faces).min() >= 0
     U = run_cgal(cgal_driver, data_path("meshes", "cylinder.off"), h, T, "sre", alpha, tmp_path)
     res = Deformer(m, h, weights="cotan", energy="sr-arap", sr_alpha=alpha).solve(
         T, tol=1e-12, max_iter=20000)
@@ -141,7 +141,7 @@ def obtuse_partial_roi(tmp_path_factory):
     """A sheared, jittered bar (many obtuse corners, edges with both opposite angles obtuse)
     posed as a ``.sel`` would be: the left end outside the ROI (status 0), the right end the
     control vertices (status 2, turned 90 degrees and shifted), the rest the ROI (1)."""
-    from arapkit.io.fileio import save_mesh
+    from arapkit.io import save_mesh
 
     b = bar(length=3.0, segments=(15, 3, 3))
     rng = np.random.default_rng(1)
@@ -171,7 +171,7 @@ CGAL_POSED = {"sre": ("sr-arap", "cotan-clamped-each", True),
 def test_cgal_problem_on_obtuse_mesh_with_partial_roi(cgal_driver, obtuse_partial_roi,
                                                        tmp_path, tag):
     m, path, outside, control, moved, roi = obtuse_partial_roi
-    cots = _corner_cotangents(m.vertices, m.faces)
+    cots = corner_cotangents(m.vertices, m.faces)
     assert (cots < 0).sum() > 200  # obtuse enough for the weightings to differ
     # CGAL solves the ROI only; arapkit holds the vertices outside it as handles at rest
     U = run_cgal(cgal_driver, path, control, moved, tag, 0.02, tmp_path, roi=roi,
@@ -346,7 +346,7 @@ def cli(*args):
 def bar_case(tmp_path_factory):
     import json
 
-    from arapkit.io.fileio import save_mesh
+    from arapkit.io import save_mesh
 
     d = tmp_path_factory.mktemp("methods")
     m = bar()

@@ -20,7 +20,7 @@ from conftest import data_path
 
 from arapkit import Deformer, InputError, load_mesh
 from arapkit.cli import main
-from arapkit.io.handles import load_handles
+from arapkit.io import load_handles
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, edge_weights
 
 HANDLES = Path(__file__).resolve().parent / "data" / "real_handles"

@@ -65,7 +65,7 @@ def _cactus_poses():
     from pathlib import Path
 
     from arapkit import load_mesh
-    from arapkit.io.handles import parse_handles
+    from arapkit.io import parse_handles
 
     examples = Path(__file__).resolve().parents[1] / "examples"
     mesh = load_mesh(examples / "cactus.off")

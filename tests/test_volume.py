@@ -61,7 +61,7 @@ CONVERGED = {"tol": 1e-5, "max_iter": 20000}
 
 def _case(mesh_path: Path, handle_file):
     from arapkit import load_mesh
-    from arapkit.io.handles import load_handles
+    from arapkit.io import load_handles
 
     m = load_mesh(mesh_path)
     # a file name in benchmarks/volume/, or an absolute path (pathlib keeps it as is)
@@ -330,7 +330,7 @@ def test_open_real_mesh_is_refused(data_dir):
 
 
 def _bar_files(tmp_path: Path) -> tuple[Path, Path]:
-    from arapkit.io.fileio import save_mesh
+    from arapkit.io import save_mesh
 
     m = bar(5.0, 1.0, 1.0, (20, 4, 4))
     mesh = tmp_path / "thick.off"

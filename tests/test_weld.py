@@ -13,9 +13,8 @@ import pytest
 from conftest import data_path
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.io.fileio import read_ply_vertex_properties, save_mesh
-from arapkit.mesh.model import weld
-from arapkit.mesh.welding import soup_facts, to_source, weld_handles, weld_values
+from arapkit.io import read_ply_vertex_properties, save_mesh
+from arapkit.mesh.welding import soup_facts, to_source, weld, weld_handles, weld_values
 
 
 def arapkit(*args) -> subprocess.CompletedProcess:
@@ -290,7 +289,7 @@ def test_geometric_selectors_act_on_the_welded_mesh(tmp_path):
 
 def test_welded_handle_resolution_by_hand():
     """Selections on the welded square (4 positions), vertex numbers on the soup (6)."""
-    from arapkit.io.handles import parse_handles
+    from arapkit.io import parse_handles
 
     soup = square_soup()
     w = weld(soup)

@@ -24,15 +24,16 @@ _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 from . import _compat  # noqa: E402
 from .errors import InputError  # noqa: E402
-from .io.fileio import save_mesh
-from .io.handles import (
+from .io import (
     HandleGroup,
     HandleSet,
     load_handles,
+    load_mesh,
     load_rings,
     parse_handles,
     save_def,
     save_handles,
+    save_mesh,
     save_rings,
     save_sel,
     select_box,
@@ -40,7 +41,7 @@ from .io.handles import (
     select_sphere,
 )
 from .learn.fit import LearnedRings, learn_rings
-from .mesh.model import Mesh, load_mesh
+from .mesh.model import Mesh
 from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .methods.deformer import Deformer, Result
 from .methods.laplacian import LaplacianEditor, laplacian_edit

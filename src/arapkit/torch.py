@@ -21,7 +21,6 @@ from __future__ import annotations
 import weakref
 
 import torch as _torch
-from numpy.linalg import norm as np_norm
 
 from arapkit.arap.backends.torch_backend import (
     TorchSystem,
@@ -32,6 +31,7 @@ from arapkit.arap.backends.torch_backend import (
 )
 from arapkit.arap.problem import ARAPProblem
 from arapkit.errors import InputError
+from arapkit.mesh.model import bounding_box_diagonal
 from arapkit.mesh.weights import DEFAULT_WEIGHTS
 
 __all__ = ["ARAPLayer", "arap_energy"]
@@ -239,8 +239,7 @@ class ARAPLayer(_torch.nn.Module):
         self.tol = float(tol)
         self.max_iter = int(max_iter)
         V = problem.vertices
-        self._step_tol = None if xtol is None else float(xtol) * float(
-            np_norm(V.max(axis=0) - V.min(axis=0)))
+        self._step_tol = None if xtol is None else float(xtol) * bounding_box_diagonal(V)
         if self.max_iter < 1:
             raise InputError(f"max_iter must be >= 1, got {max_iter}")
         self.adjoint_tol = (1e-10 if dtype == _torch.float64 else 1e-5) \

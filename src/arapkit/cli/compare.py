@@ -25,6 +25,7 @@ from arapkit.cli.common import (
     warn,
 )
 from arapkit.errors import InputError, require_extra
+from arapkit.io.formats import readable_formats
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
@@ -44,7 +45,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             "arapkit compare bar.off --handles bar.json --rings-file r.txt -o cmp",
         ]),
     )
-    p.add_argument("mesh", metavar="MESH", help="input mesh (OFF, OBJ, PLY, STL; may be .gz)")
+    p.add_argument("mesh", metavar="MESH", help=f"input mesh ({readable_formats()}; may be .gz)")
     p.add_argument("--handles", "-H", required=True, metavar="FILE",
                    help="handle groups (.json) or a per-vertex status file (.sel)")
     p.add_argument("--transform", "-T", metavar="FILE",
@@ -98,7 +99,7 @@ def _slug(label: str) -> str:
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit compare``; returns the exit status."""
     require_extra("matplotlib", "plots", "arapkit compare")  # it always draws compare.png
-    from arapkit.io.fileio import save_mesh
+    from arapkit.io import save_mesh
     from arapkit.methods.deformer import check_method
     from arapkit.plots.figures import save_figure
     from arapkit.workflows.compare import (

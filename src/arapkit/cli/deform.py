@@ -30,6 +30,7 @@ from arapkit.cli.common import (
     warn,
 )
 from arapkit.errors import InputError, require_extra, worded_for
+from arapkit.io.formats import readable_formats
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
@@ -56,7 +57,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "stdout; progress and notes go to stderr.",
         **add_example_epilog(EXAMPLES),
     )
-    p.add_argument("mesh", metavar="MESH", help="input mesh (OFF, OBJ, PLY, STL; may be .gz)")
+    p.add_argument("mesh", metavar="MESH", help=f"input mesh ({readable_formats()}; may be .gz)")
     p.add_argument(
         "--handles",
         "-H",
@@ -207,7 +208,7 @@ def _add_volume_options(p: argparse.ArgumentParser) -> None:
 
 def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None:
     """Refuse volume options without --volumetric, a missing mesher, a bad volume path."""
-    from arapkit.io.fileio import check_output_path
+    from arapkit.io import check_output_path
     from arapkit.methods.volumetric import MESHER_HINT, VOLUME_FORMATS, have_mesher
 
     if not args.volumetric:
@@ -229,7 +230,7 @@ def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Fail fast, before loading or solving, on any output that cannot be written."""
-    from arapkit.io.fileio import check_figure_format, check_output_path, mesh_format
+    from arapkit.io import check_figure_format, check_output_path, mesh_format
 
     inputs = [args.mesh, args.handles, args.transform, args.rings_file]
     outs = []
@@ -279,7 +280,7 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit deform``; returns the exit status."""
-    from arapkit.io.fileio import write_json
+    from arapkit.io import write_json
     from arapkit.workflows.jobs import job_report, load_job_inputs, prepare_job, save_result
 
     t0 = time.perf_counter()
@@ -345,7 +346,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report == "-":
         import json
 
-        from arapkit.io.fileio import to_jsonable
+        from arapkit.io import to_jsonable
 
         print(json.dumps(to_jsonable(report), indent=2))
     else:

@@ -123,7 +123,7 @@ def _prepare_out(path: str) -> Path:
         out.mkdir(exist_ok=True)
     except OSError as e:
         raise InputError(f"{out}: cannot create the output folder ({e.strerror or e})") from None
-    from arapkit.io.fileio import check_output_path
+    from arapkit.io import check_output_path
 
     # before any solve: the folder must really take files (read-only or immutable ones don't)
     check_output_path(out / "demo-report.json", what="demo output")
@@ -169,7 +169,7 @@ def _row(label: Any, res) -> dict[str, Any]:
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit demo``; returns the exit status."""
     require_extra("matplotlib", "plots", "arapkit demo")  # before any solving: it draws figures
-    from arapkit.io.fileio import save_mesh, write_json
+    from arapkit.io import save_mesh, write_json
     from arapkit.mesh.shapes import bar, bar_bend, bar_two_materials
     from arapkit.plots import figures as plots
 

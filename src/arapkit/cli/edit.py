@@ -110,7 +110,7 @@ def build_state(args: argparse.Namespace) -> Any:
     from arapkit import load_mesh
     from arapkit.editor.state import EditorState
     from arapkit.errors import InputError
-    from arapkit.io.handles import load_handles, load_rings
+    from arapkit.io import load_handles, load_rings
     from arapkit.validate import ring_size as ring_size_rule
 
     if args.session:

@@ -17,7 +17,8 @@ from typing import Any
 import numpy as np
 
 from arapkit.cli.common import add_example_epilog
-from arapkit.mesh.model import load_mesh
+from arapkit.io import load_mesh
+from arapkit.io.formats import readable_formats
 
 __all__ = ["add_parser", "inspect_mesh", "run"]
 
@@ -42,7 +43,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             ["arapkit info examples/cactus.off", "arapkit info scan.ply.gz --json"]
         ),
     )
-    p.add_argument("mesh", metavar="MESH", help="mesh file (OFF, OBJ, PLY, STL; may be .gz)")
+    p.add_argument("mesh", metavar="MESH", help=f"mesh file ({readable_formats()}; may be .gz)")
     p.add_argument("--json", action="store_true", help="print the facts as one JSON object")
     return p
 
@@ -177,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
     facts = inspect_mesh(load_mesh(args.mesh))
     facts["file"] = args.mesh
     if args.json:
-        from arapkit.io.fileio import to_jsonable
+        from arapkit.io import to_jsonable
 
         print(json.dumps(to_jsonable(facts), indent=2))
         return 0

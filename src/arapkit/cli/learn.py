@@ -35,6 +35,7 @@ from arapkit.cli.common import (
     positive_int,
 )
 from arapkit.errors import InputError, require_extra
+from arapkit.io import readable_formats
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 # the frames are read by the library; their names stay importable here
@@ -92,7 +93,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "frames",
         nargs="+",
         metavar="FRAMES",
-        help="mesh files (OFF, OBJ, PLY, STL), globs, folders of meshes, or .npz files with "
+        help=f"mesh files ({readable_formats()}), globs, folders of meshes, or .npz files with "
         "V (frames x vertices x 3) and F; each .npz, folder or glob is one sequence",
     )
     p.add_argument("-o", "--output", required=True, metavar="OUT",
@@ -130,7 +131,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
     """Fail before any work on an output that cannot be written."""
-    from arapkit.io.fileio import check_figure_format, check_output_path, mesh_format
+    from arapkit.io import check_figure_format, check_output_path, mesh_format
 
     if args.output.lower().endswith((".ply", ".ply.gz")):
         raise InputError(f"{args.output}: the rigidity map is text or .npy; "
@@ -183,13 +184,13 @@ def _learn(args, frames: Frames, ref: int) -> FramesLearned:
 
 
 def _write(args, reference, res) -> None:
-    from arapkit.io.handles import save_rings
+    from arapkit.io import save_rings
     from arapkit.mesh.welding import to_source
 
     # a welded reference: the map is written for the input's own vertices
     save_rings(args.output, to_source(reference, res.rings))
     if args.ply:
-        from arapkit.io.fileio import save_mesh
+        from arapkit.io import save_mesh
 
         for line in save_mesh(args.ply, reference.vertices, like=reference,
                               vertex_properties={"rings": res.rings.astype(np.int32)}):

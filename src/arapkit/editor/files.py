@@ -20,11 +20,12 @@ import numpy as np
 from arapkit import validate
 from arapkit.editor.state import EditorState
 from arapkit.errors import InputError
+from arapkit.io.formats import READ_FORMATS, is_readable_mesh, readable_formats
 
 __all__ = ["MESH_SUFFIXES", "FileActions", "human_size", "printable", "safe_stem",
            "upload_suffix"]
 
-MESH_SUFFIXES = (".obj", ".ply", ".off", ".stl")
+MESH_SUFFIXES = tuple("." + f for f in READ_FORMATS)
 
 
 def safe_stem(name: str, default: str = "mesh") -> str:
@@ -199,8 +200,8 @@ class FileActions:
         from arapkit import load_mesh
 
         self._check_upload(name, data, "meshes")
-        if upload_suffix(name).removesuffix(".gz") not in MESH_SUFFIXES:
-            raise InputError(f"{name}: not a mesh file (use OBJ, PLY, OFF or STL)")
+        if not is_readable_mesh(name):
+            raise InputError(f"{name}: not a mesh file (use {readable_formats(' or ')})")
         mesh = self._via_tempfile(name, data, load_mesh)
         mesh.name = safe_stem(name)
         with self.lock:
@@ -209,7 +210,7 @@ class FileActions:
 
     def load_rings_bytes(self, name: str, data: bytes) -> np.ndarray:
         """Use an uploaded rigidity map (text, .npy or PLY with ``rings``); undoable."""
-        from arapkit.io.handles import load_rings
+        from arapkit.io import load_rings
 
         self._check_upload(name, data, "rings files")
         with self.lock:
@@ -263,7 +264,7 @@ class FileActions:
         A mesh that came from an upload has no file of its own, so its rest shape is
         saved next to the session first and the session names that file.
         """
-        from arapkit.io.fileio import save_mesh
+        from arapkit.io import save_mesh
 
         with self.lock:
             out = self._ensure_export_dir()
@@ -281,8 +282,7 @@ class FileActions:
         Everything the mesh's file carried comes along (``save_mesh(like=...)``); a mesh
         loaded from OBJ is also exported as OBJ, which keeps its UVs and materials.
         """
-        from arapkit.io.fileio import save_mesh
-        from arapkit.io.handles import save_rings
+        from arapkit.io import save_mesh, save_rings
 
         with self.lock:
             out = self._ensure_export_dir()

@@ -54,7 +54,7 @@ def read_session(path: str | os.PathLike[str]) -> dict[str, Any]:
 
 def write_session(path: str | os.PathLike[str], session: dict[str, Any]) -> Path:
     """Write ``session`` as JSON, atomically (a crash never leaves half a file)."""
-    from arapkit.io.fileio import write_json
+    from arapkit.io import write_json
 
     path = Path(path)
     write_json(path, session, indent=1)

@@ -300,7 +300,7 @@ class EditorState:
         return True
 
     def add_handle_set(self, handle_set: Any, record: bool = True) -> list[Handle]:
-        """Add the groups of an :class:`arapkit.io.handles.HandleSet` (e.g. ``--handles``).
+        """Add the groups of an :class:`arapkit.mesh.selection.HandleSet` (e.g. ``--handles``).
 
         A group's targets become the new handle's anchor, so its gizmo starts where the
         file put it; ``fixed`` groups come in frozen.

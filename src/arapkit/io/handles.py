@@ -1,15 +1,10 @@
-"""Handle and rigidity files: which vertices are constrained, where they go, and per-vertex r.
+"""Handle JSON files: which vertices are constrained and where they go.
 
-Three handle sources are understood, all resolved against the rest vertex positions:
-
-* **Handle JSON** (``*.json``): a list of handle groups. Each group selects vertices by
-  exactly one of ``indices``, ``box``, ``sphere`` or ``nearest`` and says where they go with
-  ``fixed`` (the default), ``translate``, ``rotate`` (then optional ``translate``) or
-  ``targets``. The schema is documented in the README (section "Handle files").
-* **Botsch–Sorkine / CGAL benchmark** (``*.sel`` + ``*.def``): one status per vertex
-  (0 fixed, 1 free, 2 handle; nothing else) and a 4x4 matrix applied to the handle vertices.
-* **Rigidity maps** (``load_rings``): one integer r >= 1 per vertex, as plain text, ``.npy``
-  or a PLY vertex property named ``rings``.
+A handle file is a list of handle groups. Each group selects vertices by exactly one of
+``indices``, ``box``, ``sphere`` or ``nearest`` and says where they go with ``fixed`` (the
+default), ``translate``, ``rotate`` (then optional ``translate``) or ``targets``. The schema
+is documented in the README (section "Handle files"). :func:`load_handles` also reads the
+benchmark ``.sel`` + ``.def`` pairs (:mod:`arapkit.io.seldef`).
 
 Everything here is a pure function of the file contents and the vertex array, so the
 command line and the browser editor share it. Every problem raises
@@ -27,39 +22,39 @@ Examples
 
 from __future__ import annotations
 
-import io
 import json
 import math
 import os
-import re
-from collections.abc import Iterator, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from arapkit.errors import InputError
-from arapkit.mesh.model import COORDINATE_RANGE
-from arapkit.validate import check_input_size, parse_json, read_input, ring_sizes
+from ..errors import InputError
+from ..mesh.selection import (
+    HandleContext,
+    HandleGroup,
+    HandleSet,
+    check_target_reach,
+    rotation_matrix,
+    select_box,
+    select_nearest,
+    select_sphere,
+    short_name,
+)
+from ..validate import parse_json, read_input
+from .atomic import write_json
+from .seldef import load_def, load_sel
 
 __all__ = [
-    "HandleGroup",
-    "HandleSet",
+    "COMMENT_KEY",
+    "GROUP_KEYS",
+    "MOTION_KEYS",
+    "SELECTION_KEYS",
     "handles_to_json",
-    "load_def",
     "load_handles",
-    "load_rings",
-    "load_sel",
     "parse_handles",
-    "rotation_matrix",
-    "save_def",
     "save_handles",
-    "save_rings",
-    "save_sel",
-    "select_box",
-    "select_nearest",
-    "select_sphere",
 ]
 
 SELECTION_KEYS = ("indices", "box", "sphere", "nearest")
@@ -81,176 +76,6 @@ _REQUIRED_SUB_KEYS = {
 }
 
 
-# --------------------------------------------------------------------------- data types
-
-
-@dataclass(frozen=True)
-class HandleGroup:
-    """One named group of constrained vertices.
-
-    Attributes
-    ----------
-    name : str
-        Name used in messages and in saved files.
-    indices : (k,) int64
-        Vertex indices, in selection order (explicit ``indices`` keep the order given,
-        geometric selections are ascending).
-    targets : (k, 3) float64
-        Target position of each selected vertex.
-    kind : str
-        ``"fixed"`` (targets equal the rest positions) or ``"moved"``.
-    """
-
-    name: str
-    indices: np.ndarray
-    targets: np.ndarray
-    kind: str = "fixed"
-
-
-@dataclass(frozen=True)
-class HandleSet:
-    """All handle groups of one file, flattened for :class:`arapkit.Deformer`.
-
-    Attributes
-    ----------
-    groups : list of HandleGroup
-    source : str
-        File name (or ``"<handles>"``) for messages.
-    indices : (h,) int64
-        Concatenation of the groups' indices (unique across groups).
-    targets : (h, 3) float64
-        Matching target positions.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> g = HandleGroup("a", np.array([1]), np.zeros((1, 3)))
-    >>> HandleSet([g]).indices.tolist()
-    [1]
-    """
-
-    groups: list[HandleGroup]
-    source: str = "<handles>"
-    indices: np.ndarray = field(init=False, repr=False)
-    targets: np.ndarray = field(init=False, repr=False)
-
-    def __post_init__(self) -> None:
-        if self.groups:
-            idx = np.concatenate([g.indices for g in self.groups]).astype(np.int64)
-            tgt = np.concatenate([g.targets for g in self.groups]).astype(np.float64)
-        else:
-            idx, tgt = np.zeros(0, np.int64), np.zeros((0, 3))
-        object.__setattr__(self, "indices", idx)
-        object.__setattr__(self, "targets", tgt.reshape(-1, 3))
-
-    @property
-    def fixed_mask(self) -> np.ndarray:
-        """(h,) bool: True for handles whose group is ``fixed``."""
-        if not self.groups:
-            return np.zeros(0, bool)
-        return np.concatenate([np.full(len(g.indices), g.kind == "fixed") for g in self.groups])
-
-    def __len__(self) -> int:
-        return len(self.indices)
-
-
-# --------------------------------------------------------------------------- selections
-
-
-def select_box(vertices: np.ndarray, lo: Sequence[float], hi: Sequence[float]) -> np.ndarray:
-    """Indices of vertices inside the axis-aligned box ``[lo, hi]`` (inclusive), ascending.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> select_box(np.array([[0.0, 0, 0], [2, 0, 0]]), [-1, -1, -1], [1, 1, 1]).tolist()
-    [0]
-    """
-    V = np.asarray(vertices, dtype=np.float64)
-    inside = np.all((V >= np.asarray(lo, float)) & (V <= np.asarray(hi, float)), axis=1)
-    return np.flatnonzero(inside).astype(np.int64)
-
-
-def select_sphere(vertices: np.ndarray, center: Sequence[float], radius: float) -> np.ndarray:
-    """Indices of vertices within ``radius`` of ``center`` (inclusive), ascending.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> select_sphere(np.array([[0.0, 0, 0], [2, 0, 0]]), [2, 0, 0], 0.5).tolist()
-    [1]
-    """
-    V = np.asarray(vertices, dtype=np.float64)
-    with np.errstate(over="ignore"):  # numpy squares go to inf; Python's float ** raises
-        d2 = np.sum((V - np.asarray(center, float)) ** 2, axis=1)
-        r2 = np.float64(radius) ** 2
-    return np.flatnonzero(d2 <= r2).astype(np.int64)
-
-
-def select_nearest(vertices: np.ndarray, point: Sequence[float], k: int) -> np.ndarray:
-    """Indices of the ``k`` vertices nearest to ``point``, ascending.
-
-    Ties are broken by the lower vertex index so that the result is reproducible.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [5, 0, 0]])
-    >>> select_nearest(V, [0.9, 0, 0], 2).tolist()
-    [0, 1]
-    """
-    V = np.asarray(vertices, dtype=np.float64)
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= len(V):
-        raise InputError(f"select_nearest: k must be an integer in 1..{len(V)}, got {k!r}")
-    P = np.asarray(point, dtype=np.float64)
-    if P.shape != (3,) or not np.all(np.isfinite(P)):
-        raise InputError(f"select_nearest: point must be 3 finite numbers, got {point!r}")
-    d2 = np.sum((V - P) ** 2, axis=1)
-    # lexsort by (distance, index): stable and deterministic for equal distances
-    order = np.lexsort((np.arange(len(V)), d2))[:k]
-    return np.sort(order).astype(np.int64)
-
-
-def rotation_matrix(axis: Sequence[float], degrees: float) -> np.ndarray:
-    """Right-handed rotation by ``degrees`` about ``axis`` (Rodrigues' formula).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> np.round(rotation_matrix([0, 0, 1], 90) @ [1, 0, 0], 12).tolist()
-    [0.0, 1.0, 0.0]
-    """
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.abs(a).max()  # first to O(1): the norm of a 1e200 axis would overflow
-    a = a / np.linalg.norm(a)
-    t = math.radians(float(degrees))
-    K = np.array([[0.0, -a[2], a[1]], [a[2], 0.0, -a[0]], [-a[1], a[0], 0.0]])
-    return np.eye(3) + math.sin(t) * K + (1.0 - math.cos(t)) * (K @ K)
-
-
-# --------------------------------------------------------------------------- JSON handles
-
-
-class _Where:
-    """Formats the 'file: group ...' prefix of messages."""
-
-    def __init__(self, source: str, number: int, name: str | None) -> None:
-        self.source, self.number, self.name = source, number, name
-
-    def __call__(self, msg: str) -> InputError:
-        return InputError(f"{self.source}: handle {self.label}: {msg}")
-
-    @property
-    def label(self) -> str:
-        """``group N ('name')``, the name cut short: a message is one readable line."""
-        return f"group {self.number}" + (f" ({_short(self.name)})" if self.name else "")
-
-
-def _short(name: str) -> str:
-    """``repr`` of a name, shortened to about 60 characters."""
-    return repr(name) if len(name) <= 60 else repr(name[:57]) + "..."
-
-
 def _is_number(x: Any) -> bool:
     # JSON true/false arrive as bool, a subclass of int: never accept them as numbers
     if not isinstance(x, (int, float)) or isinstance(x, bool):
@@ -270,13 +95,13 @@ def _brief(value: Any) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
-def _vec3(value: Any, what: str, err: _Where) -> np.ndarray:
+def _vec3(value: Any, what: str, err: HandleContext) -> np.ndarray:
     if not (isinstance(value, list) and len(value) == 3 and all(_is_number(x) for x in value)):
         raise err(f"{what} must be a list of 3 finite numbers, got {_brief(value)}")
     return np.asarray(value, dtype=np.float64)
 
 
-def _check_keys(obj: Any, allowed: frozenset, what: str, err: _Where) -> dict:
+def _check_keys(obj: Any, allowed: frozenset, what: str, err: HandleContext) -> dict:
     if not isinstance(obj, dict):
         raise err(f"{what} must be an object, got {_brief(obj)}")
     unknown = sorted(set(obj) - allowed)
@@ -285,7 +110,7 @@ def _check_keys(obj: Any, allowed: frozenset, what: str, err: _Where) -> dict:
     return obj
 
 
-def _sub(group: dict, key: str, err: _Where) -> dict:
+def _sub(group: dict, key: str, err: HandleContext) -> dict:
     obj = _check_keys(group[key], _SUB_KEYS[key], f"'{key}'", err)
     for req in _REQUIRED_SUB_KEYS[key]:
         if req not in obj:
@@ -293,7 +118,7 @@ def _sub(group: dict, key: str, err: _Where) -> dict:
     return obj
 
 
-def _select(group: dict, vertices: np.ndarray, err: _Where) -> np.ndarray:
+def _select(group: dict, vertices: np.ndarray, err: HandleContext) -> np.ndarray:
     kinds = [k for k in SELECTION_KEYS if k in group]
     if len(kinds) != 1:
         raise err(f"needs exactly one selection ({', '.join(SELECTION_KEYS)}), got {len(kinds)}")
@@ -339,7 +164,7 @@ def _select(group: dict, vertices: np.ndarray, err: _Where) -> np.ndarray:
     return sel
 
 
-def _move(group: dict, rest: np.ndarray, err: _Where) -> tuple[np.ndarray, str]:
+def _move(group: dict, rest: np.ndarray, err: HandleContext) -> tuple[np.ndarray, str]:
     """Target positions of the selected rest positions, and the group kind."""
     present = [k for k in MOTION_KEYS if k in group]
     if "fixed" in group:
@@ -373,26 +198,6 @@ def _move(group: dict, rest: np.ndarray, err: _Where) -> tuple[np.ndarray, str]:
     if "translate" in group:
         out = out + _vec3(group["translate"], "'translate'", err)
     return out, "moved"
-
-
-def _check_reach(targets: np.ndarray, idx: np.ndarray, V: np.ndarray, err: Any) -> None:
-    """Refuse targets outside the number range the solver computes in for this mesh.
-
-    The solver works in units of the mesh's extent and squares coordinates, so a target
-    must be within ``COORDINATE_RANGE`` both in size and in mesh extents (the rule
-    :func:`arapkit.mesh.model.check_number_range` applies to the mesh itself). Checked here,
-    the message names the file and group that put it there, not the mesh.
-    """
-    extent = float(np.max(V.max(axis=0) * 0.5 - V.min(axis=0) * 0.5)) * 2.0 if len(V) else 0.0
-    limit = COORDINATE_RANGE * min(1.0, extent) if extent > 0 else COORDINATE_RANGE
-    far = np.abs(targets).max(axis=1) > limit
-    if far.any():
-        i = int(np.argmax(far))
-        raise err(
-            f"target of vertex {int(idx[i])} reaches {float(np.abs(targets[i]).max()):.3g}, "
-            f"beyond the number range of this mesh (at most {limit:.3g}: coordinates up to "
-            f"{COORDINATE_RANGE:.0e} and {COORDINATE_RANGE:.0e} mesh extents of {extent:.3g})"
-        )
 
 
 def _group_list(data: Any, source: str) -> list:
@@ -470,13 +275,13 @@ def parse_handles(
     names: dict[str, int] = {}
     for number, g in enumerate(_group_list(data, source), start=1):
         name = g.get("name") if isinstance(g, dict) else None
-        err = _Where(source, number, name if isinstance(name, str) else None)
+        err = HandleContext(source, number, name if isinstance(name, str) else None)
         _check_keys(g, GROUP_KEYS, "group", err)
         if "name" in g and (not isinstance(name, str) or not name):
             raise err("'name' must be a non-empty string")
         name = name or f"group {number}"
         if name in names:
-            raise err(f"name {_short(name)} already used by group {names[name]}")
+            raise err(f"name {short_name(name)} already used by group {names[name]}")
         names[name] = number
         group = space.resolve(g, name, err)
         if group is not None:
@@ -509,7 +314,7 @@ class _Space:
         self.listed: list[tuple[np.ndarray, np.ndarray]] = []
         self.input_owner = np.full(len(vertices), -1, dtype=np.int64)
 
-    def resolve(self, g: dict, name: str, err: _Where) -> HandleGroup | None:
+    def resolve(self, g: dict, name: str, err: HandleContext) -> HandleGroup | None:
         """The group in the solve's numbering (None when copies claimed all of it)."""
         explicit = "indices" in g
         on = self.vertices if self.welded is None or explicit else self.welded.vertices
@@ -517,7 +322,7 @@ class _Space:
         targets, kind = _move(g, on[idx], err)
         if not np.isfinite(targets).all():
             raise err("the motion puts targets beyond double precision (too large to represent)")
-        _check_reach(targets, idx, on, err)
+        check_target_reach(targets, idx, on, err)
         number = len(self.names)
         if self.welded is not None and explicit:
             self._claim(self.input_owner, idx, err)  # one input vertex in two groups
@@ -535,14 +340,14 @@ class _Space:
         self.explicit.append(explicit)
         return HandleGroup(name, idx, targets, kind) if len(idx) else None
 
-    def _claim(self, owner: np.ndarray, idx: np.ndarray, err: _Where) -> None:
+    def _claim(self, owner: np.ndarray, idx: np.ndarray, err: HandleContext) -> None:
         taken = owner[idx] >= 0
         if np.any(taken):
             first = int(idx[np.argmax(taken)])
             what = "welded vertex" if owner is self.owner and self.welded is not None else "vertex"
             raise err(
-                f"overlaps group {_short(self.names[owner[first]])}: both select {what} {first} "
-                f"({int(taken.sum())} shared vertices)"
+                f"overlaps group {short_name(self.names[owner[first]])}: "
+                f"both select {what} {first} ({int(taken.sum())} shared vertices)"
             )
 
     def check_copies(self) -> None:
@@ -552,14 +357,6 @@ class _Space:
 
             weld_handles(self.welded, np.concatenate([i for i, _ in self.listed]),
                          np.concatenate([t for _, t in self.listed]), what=self.source)
-
-
-def _read_text(path: Path, what: str) -> str:
-    """A capped text input file (:func:`arapkit.validate.read_input`), decoded."""
-    try:
-        return read_input(path, what).decode("utf-8")
-    except UnicodeDecodeError:
-        raise InputError(f"{path}: not a text file") from None
 
 
 def load_handles(
@@ -648,264 +445,4 @@ def save_handles(path: str | os.PathLike, handles: HandleSet) -> None:
     >>> load_handles(p, np.zeros((2, 3))).targets.tolist()
     [[1.0, 1.0, 1.0]]
     """
-    from arapkit.io.fileio import write_json
-
     write_json(path, handles_to_json(handles))
-
-
-# --------------------------------------------------------------------------- .sel / .def
-
-
-_INTEGER = re.compile(r"[+-]?[0-9]+")
-
-
-def _tokens(path: Path, what: str) -> Iterator[tuple[int, str]]:
-    """(line number, token) for the whitespace-separated tokens of a text file, skipping
-    ``#`` comments; lines are read one at a time, so a long file is never split at once."""
-    for number, line in enumerate(io.StringIO(_read_text(path, what)), start=1):
-        for token in line.split("#", 1)[0].split():
-            yield number, token
-
-
-def _int_tokens(path: Path, what: str, kind: str, expected: int | None = None,
-                allowed: range | None = None) -> list[int]:
-    """The whitespace-separated integers of a text file (Python ints: no size limit).
-
-    A token that is not an integer, or outside ``allowed``, is named with its line.
-    With ``expected``, reading stops at the first token beyond that count. ``kind`` names
-    the kind of file for the size cap's message.
-    """
-    out: list[int] = []
-    for number, t in _tokens(path, kind):
-        # ASCII digits with one optional sign: "--1" and "²" pass str.isdigit but not int()
-        if not _INTEGER.fullmatch(t) or len(t) > 4000:
-            shown = t if len(t) <= 40 else t[:37] + "..."
-            raise InputError(f"{path}:{number}: {what} {shown!r} is not an integer")
-        value = int(t)
-        if allowed is not None and value not in allowed:
-            shown = t if len(t) <= 40 else t[:37] + "..."
-            raise InputError(f"{path}:{number}: {what} {shown} is not one of "
-                             f"{', '.join(map(str, allowed))}")
-        out.append(value)
-        if expected is not None and len(out) > expected:
-            raise InputError(f"{path}:{number}: more than {expected} {what}s for a mesh of "
-                             f"{expected} vertices")
-    return out
-
-
-def load_def(path: str | os.PathLike) -> np.ndarray:
-    """Read a ``.def`` file: a 4x4 affine matrix acting on column vectors ``[x, y, z, 1]``.
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.def"
-    >>> _ = p.write_text("1 0 0 5\\n0 1 0 0\\n0 0 1 0\\n0 0 0 1\\n")
-    >>> float(load_def(p)[0, 3])
-    5.0
-    """
-    path = Path(path)
-    toks = [t for _, t in _tokens(path, ".def files")]
-    try:
-        vals = [float(t) for t in toks[:17]]
-    except ValueError:
-        raise InputError(f"{path}: expected 16 numbers (a 4x4 matrix)") from None
-    if len(vals) != 16 or not all(math.isfinite(v) for v in vals):
-        raise InputError(f"{path}: expected 16 finite numbers (a 4x4 matrix), got {len(toks)}")
-    M = np.asarray(vals).reshape(4, 4)
-    if not np.allclose(M[3], [0, 0, 0, 1], atol=1e-9):
-        raise InputError(f"{path}: last row must be 0 0 0 1 (an affine transform)")
-    return M
-
-
-def load_sel(
-    path: str | os.PathLike,
-    vertices: np.ndarray,
-    matrix: np.ndarray | None = None,
-    matrix_source: str | os.PathLike | None = None,
-) -> HandleSet:
-    """Read a ``.sel`` status file (0 fixed, 1 free, 2 handle).
-
-    Parameters
-    ----------
-    path : path
-        One integer per vertex; lines starting with ``#`` are comments.
-    vertices : (n, 3) array_like
-        Rest positions.
-    matrix : (4, 4) array_like, optional
-        Affine transform of the handle (status 2) vertices; identity when omitted.
-    matrix_source : path, optional
-        The ``.def`` file ``matrix`` came from, named when it moves a handle out of the
-        number range (the ``.sel`` file is named otherwise).
-
-    Returns
-    -------
-    HandleSet
-        Group ``"fixed"`` (status 0, targets = rest) and group ``"handle"`` (status 2).
-
-    Examples
-    --------
-    >>> import tempfile, pathlib, numpy as np
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.sel"
-    >>> _ = p.write_text("# status\\n0\\n1\\n2\\n")
-    >>> M = np.eye(4); M[2, 3] = 1.0
-    >>> hs = load_sel(p, np.zeros((3, 3)), M)
-    >>> [g.name for g in hs.groups], hs.targets[1].tolist()
-    (['fixed', 'handle'], [0.0, 0.0, 1.0])
-    """
-    path = Path(path)
-    V = np.asarray(vertices, dtype=np.float64)
-    # any other code is a typo or another format: refused, not silently "free"
-    status = np.array(_int_tokens(path, "status", ".sel files", len(V), range(3)), dtype=np.int8)
-    if len(status) != len(V):
-        raise InputError(f"{path}: {len(status)} vertex statuses for a mesh of {len(V)} vertices")
-    fixed, moved = np.flatnonzero(status == 0), np.flatnonzero(status == 2)
-    if fixed.size == 0 and moved.size == 0:
-        raise InputError(f"{path}: no vertex has status 0 (fixed) or 2 (handle)")
-    M = np.eye(4) if matrix is None else np.asarray(matrix, dtype=np.float64)
-    groups = []
-    if fixed.size:
-        groups.append(HandleGroup("fixed", fixed, V[fixed].copy(), "fixed"))
-    if moved.size:
-        with np.errstate(over="ignore", invalid="ignore"):  # checked just below
-            tgt = V[moved] @ M[:3, :3].T + M[:3, 3]
-        err = _Where(str(matrix_source or path), len(groups) + 1, "handle")
-        _check_reach(tgt, moved, V, err)
-        groups.append(HandleGroup("handle", moved, tgt, "moved"))
-    return HandleSet(groups, source=str(path))
-
-
-def save_sel(
-    path: str | os.PathLike, n_vertices: int, fixed: Sequence[int], handle: Sequence[int]
-) -> None:
-    """Write a ``.sel`` file: status 0 for ``fixed``, 2 for ``handle``, 1 elsewhere.
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.sel"
-    >>> save_sel(p, 3, [0], [2])
-    >>> p.read_text().splitlines()[-3:]
-    ['0', '1', '2']
-    """
-    from arapkit.io.fileio import atomic_write
-
-    status = np.ones(int(n_vertices), dtype=np.int64)
-    status[np.asarray(fixed, dtype=np.int64)] = 0
-    status[np.asarray(handle, dtype=np.int64)] = 2
-    header = "# per vertex status: 0=fixed, 1=deformable-region, 2=handle\n"
-    header += f"# {n_vertices} vertices\n"
-    atomic_write(path, header + "\n".join(str(s) for s in status) + "\n")
-
-
-def save_def(path: str | os.PathLike, matrix: np.ndarray) -> None:
-    """Write a 4x4 matrix as a ``.def`` file (full double precision).
-
-    Examples
-    --------
-    >>> import tempfile, pathlib, numpy as np
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "a.def"
-    >>> save_def(p, np.eye(4))
-    >>> bool(np.all(load_def(p) == np.eye(4)))
-    True
-    """
-    from arapkit.io.fileio import atomic_write
-
-    M = np.asarray(matrix, dtype=np.float64).reshape(4, 4)
-    rows = [" ".join(repr(float(x)) for x in row) for row in M]
-    atomic_write(path, "# 4x4 handle transformation matrix\n" + "\n".join(rows) + "\n")
-
-
-# --------------------------------------------------------------------------- rigidity maps
-
-
-def _validate_rings(values: Any, n_vertices: int, path: Path) -> np.ndarray:
-    """One r per vertex, each in ``1..MAX_RINGS`` (:func:`arapkit.validate.ring_sizes`)."""
-    arr = values if isinstance(values, list) else np.asarray(values)
-    if isinstance(arr, np.ndarray) and arr.ndim != 1:
-        raise InputError(f"{path}: rigidity map must be 1-D (one r per vertex), got {arr.shape}")
-    if len(arr) != n_vertices:
-        raise InputError(f"{path}: {len(arr)} rigidity values for a mesh of {n_vertices} vertices")
-    return ring_sizes(arr, n_vertices, str(path)).astype(np.int64)
-
-
-def _rings_from_ply(path: Path) -> np.ndarray:
-    from arapkit.io.fileio import read_ply_vertex_properties
-
-    props = read_ply_vertex_properties(path)
-    if "rings" not in props:
-        names = ", ".join(sorted(props)) or "none"
-        raise InputError(f"{path}: no vertex property 'rings' (found: {names})")
-    return props["rings"]
-
-
-def load_rings(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
-    """Read a per-vertex rigidity map (ring size r >= 1 for each vertex).
-
-    Parameters
-    ----------
-    path : path
-        ``.npy`` (1-D integer array), ``.ply`` / ``.ply.gz`` (vertex property ``rings``),
-        or plain text with one integer per line (``#`` comments and blank lines allowed).
-    n_vertices : int
-        Vertex count of the mesh; the map must have exactly this length.
-
-    Returns
-    -------
-    (n_vertices,) int64
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "r.txt"
-    >>> _ = p.write_text("1\\n2\\n6\\n")
-    >>> load_rings(p, 3).tolist()
-    [1, 2, 6]
-    """
-    path = Path(path)
-    name = path.name.lower()
-    if "\0" in str(path):
-        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)")
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
-    if name.endswith(".npy"):
-        from arapkit.io.fileio import load_numpy
-
-        check_input_size(path.stat().st_size, path, "rings files")
-        values = load_numpy(path)
-    elif name.endswith((".ply", ".ply.gz")):
-        values = _rings_from_ply(path)
-    else:
-        values = _int_tokens(path, "rigidity value", "rings files", int(n_vertices))
-    return _validate_rings(values, int(n_vertices), path)
-
-
-def save_rings(path: str | os.PathLike, rings: np.ndarray) -> None:
-    """Write a rigidity map as ``.npy`` or plain text (one integer per line), atomically.
-
-    Examples
-    --------
-    >>> import tempfile, pathlib, numpy as np
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "r.npy"
-    >>> save_rings(p, np.array([1, 3]))
-    >>> load_rings(p, 2).tolist()
-    [1, 3]
-    """
-    from arapkit.io.fileio import atomic_write
-
-    path = Path(path)
-    r = np.asarray(rings)
-    r = _validate_rings(r, len(r), path)
-    if path.name.lower().endswith(".npy"):
-        import io
-
-        buf = io.BytesIO()
-        np.save(buf, r)
-        atomic_write(path, buf.getvalue())
-    elif path.name.lower().endswith((".ply", ".ply.gz")):
-        raise InputError(
-            f"{path}: a PLY rigidity map needs the mesh; use arapkit.io.fileio.save_mesh with "
-            "vertex_properties={'rings': ...}"
-        )
-    else:
-        atomic_write(path, "\n".join(str(int(x)) for x in r) + "\n")

@@ -6,7 +6,7 @@ OBJ texture coordinates and normals with their per-corner index tables, OBJ stat
 such as ``mtllib``/``usemtl``/``g``/``o``/``s``, extra numbers on vertex lines (the
 ``v x y z r g b`` colour extension), and every PLY vertex and face property with its
 type -- is kept in a :class:`MeshAttributes` attached to the :class:`~arapkit.Mesh` as
-``mesh.attributes``. :func:`arapkit.io.fileio.save_mesh` with ``like=mesh`` writes the
+``mesh.attributes``. :func:`arapkit.io.writers.save_mesh` with ``like=mesh`` writes the
 deformed positions together with all of it.
 
 Examples

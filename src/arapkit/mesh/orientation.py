@@ -34,6 +34,7 @@ import dataclasses
 import numpy as np
 
 from arapkit.errors import InputError
+from arapkit.mesh.model import bounding_box_diagonal
 
 __all__ = [
     "AXES",
@@ -71,7 +72,8 @@ class BoundingBox:
 
     @property
     def diagonal(self) -> float:
-        return float(np.linalg.norm(self.extents))
+        """Length of the diagonal (:func:`arapkit.mesh.model.bounding_box_diagonal`)."""
+        return bounding_box_diagonal(np.stack([self.min, self.max]))
 
 
 @dataclasses.dataclass(frozen=True)

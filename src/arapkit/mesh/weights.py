@@ -41,6 +41,7 @@ __all__ = [
     "SOUND_WEIGHTS",
     "COT_CAP",
     "edge_weights",
+    "corner_cotangents",
     "cotangent_weights",
     "voronoi_areas",
 ]
@@ -54,8 +55,17 @@ COT_CAP = 1e5
 CLAMP_FRACTION = 1e-3
 
 
-def _corner_cotangents(V: np.ndarray, F: np.ndarray) -> np.ndarray:
-    """Cotangent of the angle at each corner, shape (m, 3); corner c faces edge (c+1, c+2)."""
+def corner_cotangents(V: np.ndarray, F: np.ndarray) -> np.ndarray:
+    """Cotangent of the angle at each corner, shape (m, 3); corner c faces edge (c+1, c+2).
+
+    Computed scale-free and capped at ``COT_CAP`` in absolute value (needles stay finite).
+
+    Examples
+    --------
+    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    >>> np.round(corner_cotangents(V, np.array([[0, 1, 2]])), 12).tolist()
+    [[0.0, 1.0, 1.0]]
+    """
     cots = np.empty(F.shape, dtype=np.float64)
     for c in range(3):
         a = V[F[:, (c + 1) % 3]] - V[F[:, c]]
@@ -91,7 +101,7 @@ def cotangent_weights(mesh: Mesh, clamp_corners: bool = False) -> np.ndarray:
     0.0
     """
     F = mesh.faces
-    cots = _corner_cotangents(mesh.vertices, F)
+    cots = corner_cotangents(mesh.vertices, F)
     if clamp_corners:
         cots = np.maximum(cots, 0.0)
     # the edge opposite corner c is face edge c+1, from corner c+1 to corner c+2
@@ -168,7 +178,7 @@ def voronoi_areas(mesh: Mesh) -> np.ndarray:
     0.5
     """
     V, F = mesh.vertices, mesh.faces
-    cots = _corner_cotangents(V, F)
+    cots = corner_cotangents(V, F)
     area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]), axis=1)
     # squared length of the edge opposite each corner
     l2 = np.stack(

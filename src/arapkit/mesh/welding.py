@@ -6,7 +6,7 @@ into thousands of components: each would be moved rigidly by its handles or held
 fixed. :func:`weld` merges vertices closer than ``tol`` times the bounding-box diagonal
 into one; the welded mesh remembers the map (``mesh.welded_from``), so results can be
 written back to the input's vertices -- same count, same order -- with
-:func:`to_source` or :func:`arapkit.io.fileio.save_mesh` ``(..., like=welded)``.
+:func:`to_source` or :func:`arapkit.io.writers.save_mesh` ``(..., like=welded)``.
 
 Examples
 --------
@@ -28,7 +28,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
-from .model import Mesh, scale_free_vertices
+from .model import Mesh, bounding_box_diagonal, scale_free_vertices
+from .selection import HandleGroup, HandleSet
 
 __all__ = ["WELD_TOL", "WeldMap", "soup_facts", "to_source", "weld", "weld_frame",
            "weld_handle_set", "weld_handles", "weld_values"]
@@ -92,7 +93,7 @@ def _relative_clusters(V: np.ndarray, tol: float) -> np.ndarray:
     found on coordinates rescaled to unit size (distances of a mesh at 1e200 or 1e-200
     would over- or underflow in the k-d tree)."""
     W = scale_free_vertices(V)
-    return _clusters(W, tol * float(np.linalg.norm(np.ptp(W, axis=0))))
+    return _clusters(W, tol * bounding_box_diagonal(W))
 
 
 def weld(mesh: Mesh, tol: float | None = None) -> Mesh:
@@ -236,8 +237,8 @@ def weld_handles(
     return uniq.astype(np.int64), mean
 
 
-def weld_handle_set(mesh: Mesh, handle_set):
-    """A :class:`~arapkit.io.handles.HandleSet` read on the input, on the welded vertices.
+def weld_handle_set(mesh: Mesh, handle_set: HandleSet) -> HandleSet:
+    """A :class:`~arapkit.mesh.selection.HandleSet` read on the input, on the welded vertices.
 
     For sets resolved by input vertex (``.sel`` statuses, explicit indices). A handle file
     with ``box``, ``sphere`` or ``nearest`` groups should be read with
@@ -251,15 +252,13 @@ def weld_handle_set(mesh: Mesh, handle_set):
     Examples
     --------
     >>> from arapkit import Mesh
-    >>> from arapkit.io.handles import parse_handles
+    >>> from arapkit.io import parse_handles
     >>> m = Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 0, 0]], [[0, 1, 2], [3, 2, 0]])
     >>> hs = parse_handles([{"indices": [0]}, {"indices": [1, 3], "translate": [0, 0, 1]}],
     ...                    m.vertices)
     >>> weld_handle_set(weld(m), hs).indices.tolist()
     [0, 1]
     """
-    from ..io.handles import HandleGroup, HandleSet
-
     weld_handles(mesh, handle_set.indices, handle_set.targets, what=handle_set.source)
     seen: set[int] = set()
     groups = []

@@ -35,7 +35,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
-from arapkit.io.fileio import atomic_open, check_figure_format  # noqa: E402
+from arapkit.io import atomic_open, check_figure_format  # noqa: E402
 from arapkit.mesh.orientation import view_frame  # noqa: E402
 from arapkit.plots.colors import ENERGY_CMAP  # noqa: E402
 from arapkit.plots.render import (  # noqa: E402

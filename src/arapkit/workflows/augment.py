@@ -7,7 +7,7 @@ other.
 Examples
 --------
 >>> import tempfile, pathlib
->>> from arapkit.io.fileio import save_mesh
+>>> from arapkit.io import save_mesh
 >>> from arapkit.mesh.shapes import bar
 >>> p = pathlib.Path(tempfile.mkdtemp()) / "bar.off"
 >>> m = bar(); _ = save_mesh(p, m.vertices, m.faces)
@@ -24,7 +24,7 @@ from collections.abc import Sequence
 import numpy as np
 
 from ..errors import InputError
-from ..mesh.model import load_mesh
+from ..io import load_mesh
 from ..validate import integer
 
 __all__ = ["augment_jobs"]
@@ -111,7 +111,7 @@ def augment_jobs(meshes: Sequence[str | os.PathLike], n: int, seed: int = 0,
     Examples
     --------
     >>> import tempfile, pathlib
-    >>> from arapkit.io.fileio import save_mesh
+    >>> from arapkit.io import save_mesh
     >>> from arapkit.mesh.shapes import bar
     >>> p = pathlib.Path(tempfile.mkdtemp()) / "bar.off"
     >>> m = bar(); _ = save_mesh(p, m.vertices, m.faces)

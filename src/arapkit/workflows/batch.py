@@ -21,7 +21,7 @@ modification times, is ``skipped``.
 Examples
 --------
 >>> import tempfile, pathlib, json
->>> from arapkit.io.fileio import save_mesh
+>>> from arapkit.io import save_mesh
 >>> from arapkit.mesh.shapes import bar
 >>> d = pathlib.Path(tempfile.mkdtemp())
 >>> m = bar()
@@ -101,7 +101,7 @@ def require_dask() -> None:
 
 def _check_outdir(outdir: Path) -> None:
     """Create OUTDIR and prove it writable before any cluster starts or job runs."""
-    from ..io.fileio import check_output_path
+    from ..io import check_output_path
 
     if outdir.exists() and not outdir.is_dir():
         raise InputError(f"{outdir}: output folder is a file")
@@ -198,7 +198,7 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
     dict
         One summary row (keys :data:`SUMMARY_COLUMNS`).
     """
-    from ..io.fileio import write_json
+    from ..io import write_json
     from .jobs import job_report, prepare_job, save_result
 
     t0 = time.perf_counter()
@@ -288,7 +288,7 @@ class _Progress:
 
 def write_summary(path: str | os.PathLike, rows: Sequence[dict]) -> None:
     """``summary.csv`` with :data:`SUMMARY_COLUMNS`, atomically."""
-    from ..io.fileio import atomic_write
+    from ..io import atomic_write
 
     buf = io.StringIO()
     writer = csv.DictWriter(buf, fieldnames=SUMMARY_COLUMNS, lineterminator="\n")

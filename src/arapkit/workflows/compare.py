@@ -153,7 +153,7 @@ def write_csv(path, rows: list[dict[str, Any]]) -> None:
     import csv
     import io
 
-    from ..io.fileio import atomic_write
+    from ..io import atomic_write
 
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=list(CSV_COLUMNS), lineterminator="\n")

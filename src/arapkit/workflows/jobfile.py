@@ -86,7 +86,7 @@ def _check_weld(value: Any, where: str) -> float | None:
 
 def _check_output(out: Any, where: str) -> None:
     """``output``: a mesh file name inside the output folder."""
-    from ..io.fileio import mesh_format
+    from ..io import mesh_format
 
     if not isinstance(out, str) or not out:
         raise InputError(f"{where}: 'output' must be a file name inside the output folder")
@@ -226,7 +226,7 @@ enclosed in double quotes at column 2)
 
 def write_jobs(path: str | os.PathLike, jobs: Iterable[dict]) -> None:
     """Write jobs as JSON Lines, atomically."""
-    from ..io.fileio import atomic_write, to_jsonable
+    from ..io import atomic_write, to_jsonable
 
     atomic_write(path, "".join(json.dumps(to_jsonable(j)) + "\n" for j in jobs))
 

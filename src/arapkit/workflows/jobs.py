@@ -8,7 +8,7 @@ the solver's parallel sums are taken per chunk, and the chunking follows the thr
 Examples
 --------
 >>> import tempfile, pathlib, json
->>> from arapkit.io.fileio import save_mesh
+>>> from arapkit.io import save_mesh
 >>> from arapkit.mesh.shapes import bar
 >>> d = pathlib.Path(tempfile.mkdtemp())
 >>> m = bar()
@@ -75,7 +75,7 @@ class DeformJob:
     rings : int
         Ring size for every vertex (ignored when ``rings_file`` is given).
     rings_file : str or None
-        Per-vertex ring sizes (see :func:`arapkit.io.handles.load_rings`).
+        Per-vertex ring sizes (see :func:`arapkit.io.rigidity.load_rings`).
     weights, tol, max_iter, init, accelerate
         As for :class:`arapkit.Deformer`.
     energy : str
@@ -146,7 +146,7 @@ class PreparedJob:
 
 def _load_handles(job: DeformJob, source: Any, mesh: Any):
     """The job's handles on ``mesh`` (``source`` welded, or ``source`` itself)."""
-    from ..io.handles import load_handles, parse_handles
+    from ..io import load_handles, parse_handles
 
     welded = None if mesh is source else mesh
     if isinstance(job.handles, (str, os.PathLike)):
@@ -184,7 +184,7 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
     InputError
         Any bad input, with a one-line message naming the file.
     """
-    from ..mesh.model import load_mesh
+    from ..io import load_mesh
 
     if job.energy not in ENERGIES:
         raise InputError(f"energy {job.energy} is not available in this build "
@@ -209,7 +209,7 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
     # vertex numbers in handles and a rings map are the input's: mapped onto a welded mesh
     hs = _load_handles(job, source, mesh)
     if job.rings_file:
-        from ..io.handles import load_rings
+        from ..io import load_rings
 
         rings: np.ndarray | int = load_rings(job.rings_file, source.n_vertices)
         if mesh is not source:
@@ -263,7 +263,7 @@ def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[s
     properties) comes out again, and a welded solve is written to the input's own
     vertices. Returns warning lines for what the output format cannot carry.
     """
-    from ..io.fileio import save_mesh
+    from ..io import save_mesh
 
     return save_mesh(
         output,
@@ -372,7 +372,7 @@ def describe_groups(vertices: np.ndarray, hs) -> list[str]:
 
     Examples
     --------
-    >>> from arapkit.io.handles import parse_handles
+    >>> from arapkit.io import parse_handles
     >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
     >>> hs = parse_handles([{"name": "a", "indices": [0]},
     ...                     {"name": "b", "indices": [2], "translate": [0, 1, 0]}], V)

@@ -29,9 +29,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..errors import InputError
-from ..io.fileio import atomic_open, load_numpy
+from ..io import atomic_open, is_readable_mesh, load_mesh, load_numpy, readable_formats
 from ..learn import LearnedRings, learn_rings, learn_rings_sequences
-from ..mesh.model import Mesh, load_mesh
+from ..mesh.model import Mesh
 from ..mesh.weights import DEFAULT_WEIGHTS
 from ..validate import real_array
 
@@ -69,11 +69,6 @@ def _natural_key(path: str) -> list:
     return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", path)]
 
 
-def _is_mesh_file(name: str) -> bool:
-    low = name.lower()
-    return low.endswith(MESH_SUFFIXES) or low.endswith(tuple(s + ".gz" for s in MESH_SUFFIXES))
-
-
 def expand_frames(items: list[str]) -> list[str]:
     """Files named by ``items``: files as given, folders and globs expanded in natural order.
 
@@ -87,10 +82,10 @@ def expand_frames(items: list[str]) -> list[str]:
     paths: list[str] = []
     for item in items:
         if os.path.isdir(item):
-            found = sorted((os.path.join(item, f) for f in os.listdir(item) if _is_mesh_file(f)),
+            found = sorted((os.path.join(item, f) for f in os.listdir(item) if is_readable_mesh(f)),
                            key=_natural_key)
             if not found:
-                raise InputError(f"{item}: folder holds no mesh files (OFF, OBJ, PLY, STL)")
+                raise InputError(f"{item}: folder holds no mesh files ({readable_formats()})")
             paths += found
         elif not os.path.exists(item) and _GLOB_CHARS.search(item):
             found = sorted((f for f in glob.glob(item) if os.path.isfile(f)), key=_natural_key)

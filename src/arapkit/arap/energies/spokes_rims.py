@@ -22,7 +22,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ...mesh.weights import _corner_cotangents
+from ...mesh.weights import corner_cotangents
 from .base import NeighbourhoodEnergy, energy_from_entries
 
 if TYPE_CHECKING:
@@ -45,7 +45,7 @@ def face_edge_weights(graph: EdgeGraph, w: np.ndarray, weights_kind: str | None)
     """
     F, FE = graph.faces, graph.face_edges
     if weights_kind in ("cotan", "cotan-clamped-each"):
-        cots = _corner_cotangents(graph.vertices, F)
+        cots = corner_cotangents(graph.vertices, F)
         if weights_kind == "cotan-clamped-each":
             cots = np.maximum(cots, 0.0)
         # corner c faces edge (c+1, c+2): face edge c = (c, c+1) faces corner c+2

@@ -1,8 +1,14 @@
-"""Writing deformed positions together with everything the source file carried.
+"""Writing meshes: plain positions and triangles, or everything the source file carried.
 
-Used by :func:`arapkit.io.fileio.save_mesh` when it is given ``like=mesh`` and that mesh
-has :class:`~arapkit.mesh.attributes.MeshAttributes`. Each writer returns the file's bytes
-and a list of warnings, one per kind of data the target format has no place for.
+PLY, OFF and OBJ are written here with full double precision (PLY as binary little-endian,
+carrying extra per-vertex properties such as ``energy`` and ``rings``); STL and GLB, which
+store float32 anyway, go through trimesh. The format is chosen by the extension
+(:data:`arapkit.io.formats.MESH_FORMATS`), a trailing ``.gz`` compresses any of them, and
+every file is written atomically (:func:`arapkit.io.atomic.atomic_open`).
+
+With ``like=mesh`` (a mesh whose :class:`~arapkit.mesh.attributes.MeshAttributes` the reader
+kept), :func:`save_mesh` writes the deformed positions together with everything the source
+carried, with one warning per kind of data the target format has no place for.
 
 What goes where (``docs/io.md`` has the table):
 
@@ -20,14 +26,21 @@ What goes where (``docs/io.md`` has the table):
 
 from __future__ import annotations
 
+import gzip
+import io
+import os
 from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..mesh.attributes import MeshAttributes, recompute_normals
-from .fileio import ply_property_column
+from .atomic import atomic_write
+from .formats import mesh_format
 
-__all__ = ["write_with_attributes"]
+__all__ = ["ply_property_column", "save_mesh", "write_with_attributes"]
 
 _PLY_NAMES = {
     "f8": "double", "f4": "float", "i4": "int", "u4": "uint", "i2": "short",
@@ -213,15 +226,17 @@ def write_with_attributes(
     V: np.ndarray,
     attrs: MeshAttributes,
     props: Mapping[str, np.ndarray],
-    trimesh_bytes: Callable[[np.ndarray, np.ndarray, str], bytes],
+    trimesh_bytes: Callable[[np.ndarray, np.ndarray, str], bytes] | None = None,
 ) -> tuple[bytes, list[str]]:
     """Bytes of ``fmt`` for positions ``V`` with ``attrs``, and the warnings.
+
+    STL and GLB go through ``trimesh_bytes(V, triangles, fmt)`` (trimesh by default).
 
     Examples
     --------
     >>> a = MeshAttributes("obj", np.array([3]), np.arange(3),
     ...                    statements=[(0, "mtllib m.mtl")])
-    >>> data, warn = write_with_attributes("off", np.eye(3), a, {}, None)
+    >>> data, warn = write_with_attributes("off", np.eye(3), a, {})
     >>> warn
     ['OFF cannot carry them: OBJ materials/groups (mtllib) were not written']
     """
@@ -238,4 +253,156 @@ def write_with_attributes(
         if attrs.source_format == "off":
             keep |= {"colors", "vertex_extra", "normals"}
         return _off(V, attrs), _lost(attrs, fmt, keep)
-    return trimesh_bytes(V, _fan(attrs), fmt), _lost(attrs, fmt, set())
+    return (trimesh_bytes or _trimesh_bytes)(V, _fan(attrs), fmt), _lost(attrs, fmt, set())
+
+
+# --------------------------------------------------------------------------- plain meshes
+
+
+def ply_property_column(name: str, values, n: int) -> np.ndarray:
+    """A vertex property as PLY can hold it: n values, int32 for integers, else double.
+
+    Examples
+    --------
+    >>> ply_property_column("rings", [1, 2], 2).dtype.name
+    'int32'
+    """
+    arr = np.asarray(values)
+    if arr.shape != (n,):
+        raise ValueError(f"vertex property {name!r} has shape {arr.shape}, expected ({n},)")
+    if not name.isidentifier():
+        raise ValueError(f"vertex property name {name!r} is not a plain identifier")
+    # PLY has no 64-bit integers: integers as int32, everything else as double
+    return arr.astype(np.int32 if arr.dtype.kind in "iub" else np.float64)
+
+
+def _ply_bytes(vertices: np.ndarray, faces: np.ndarray, props: Mapping[str, np.ndarray]) -> bytes:
+    n, m = len(vertices), len(faces)
+    fields = [("x", "<f8"), ("y", "<f8"), ("z", "<f8")]
+    columns: list[np.ndarray] = [vertices[:, 0], vertices[:, 1], vertices[:, 2]]
+    for name, values in props.items():
+        col = ply_property_column(name, values, n)
+        fields.append((name, col.dtype.newbyteorder("<").str))
+        columns.append(col)
+    vert = np.empty(n, dtype=fields)
+    for (name, _), col in zip(fields, columns, strict=True):
+        vert[name] = col
+    face = np.empty(m, dtype=[("k", "u1"), ("i", "<i4", (3,))])
+    face["k"] = 3
+    face["i"] = faces
+    header = ["ply", "format binary_little_endian 1.0", "comment written by arapkit"]
+    header.append(f"element vertex {n}")
+    header += [f"property {_ply_type(t)} {f}" for f, t in fields]
+    header += [f"element face {m}", "property list uchar int vertex_indices", "end_header"]
+    return ("\n".join(header) + "\n").encode("ascii") + vert.tobytes() + face.tobytes()
+
+
+def _savetxt(fmt: str, arr: np.ndarray) -> str:
+    buf = io.StringIO()
+    np.savetxt(buf, arr, fmt=fmt)
+    return buf.getvalue()
+
+
+def _text_bytes(vertices: np.ndarray, faces: np.ndarray, fmt: str) -> bytes:
+    # %.17g round-trips every double exactly; generic exporters round to fixed decimals
+    if fmt == "off":
+        head = f"OFF\n{len(vertices)} {len(faces)} 0\n"
+        body = _savetxt("%.17g", vertices) + _savetxt("3 %d %d %d", faces)
+    else:
+        head = "# written by arapkit\n"
+        body = _savetxt("v %.17g %.17g %.17g", vertices) + _savetxt("f %d %d %d", faces + 1)
+    return (head + body).encode("ascii")
+
+
+def _trimesh_bytes(vertices: np.ndarray, faces: np.ndarray, fmt: str) -> bytes:
+    import trimesh
+
+    tm = trimesh.Trimesh(vertices=vertices, faces=faces, process=False, validate=False)
+    data = trimesh.exchange.export.export_mesh(tm, None, file_type=fmt)
+    return data.encode("utf-8") if isinstance(data, str) else bytes(data)
+
+
+def save_mesh(
+    path: str | os.PathLike,
+    vertices: np.ndarray,
+    faces: np.ndarray | None = None,
+    vertex_properties: Mapping[str, np.ndarray] | None = None,
+    *,
+    like: Any = None,
+) -> list[str]:
+    """Write a mesh atomically, in the format named by the extension.
+
+    Parameters
+    ----------
+    path : path
+        ``.ply``, ``.obj``, ``.off``, ``.stl`` or ``.glb``, optionally followed by ``.gz``.
+    vertices : (n, 3) float
+    faces : (m, 3) int, optional
+        Triangles; not needed (and not used) when ``like`` is given.
+    vertex_properties : dict of name -> (n,) array, optional
+        Extra per-vertex values (``energy``, ``rings`` ...). Only PLY stores them; other
+        formats drop them because they have no place for them.
+    like : Mesh, optional
+        The mesh ``vertices`` belong to (the loaded input, or a mesh made by
+        :func:`arapkit.mesh.welding.weld`, whose values are then written to the input's own
+        vertices). Everything its file carried is written again: the original polygons
+        (also faces dropped as degenerate), UVs with their seams, normals recomputed
+        from ``vertices``, OBJ materials and groups, colours, PLY properties. See
+        ``docs/io.md`` for what each format keeps.
+
+    Returns
+    -------
+    list of str
+        One warning line per kind of data the output format cannot carry (empty when
+        nothing was lost). The CLI prints them on stderr.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib, numpy as np
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "t.off"
+    >>> save_mesh(p, np.eye(3), np.array([[0, 1, 2]]))
+    []
+    >>> p.read_text().splitlines()[0]
+    'OFF'
+    """
+    fmt, gz = mesh_format(path)
+    V = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    # no file with a NaN or infinite coordinate ever leaves the library
+    bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
+    if len(bad):
+        raise InputError(
+            f"{path}: not written: vertex {bad[0]} has a non-finite coordinate "
+            f"({len(bad)} such vertices)"
+        )
+    props = dict(vertex_properties or {})
+    warnings: list[str] = []
+    attrs = None
+    if like is not None:
+        wf = getattr(like, "welded_from", None)
+        if wf is not None:
+            if len(V) != like.n_vertices:
+                raise ValueError(f"{len(V)} vertices for a welded mesh of {like.n_vertices}")
+            V = V[wf.index]
+            props = {k: np.asarray(v)[wf.index] for k, v in props.items()}
+            like = wf.source
+        if len(V) != like.n_vertices:
+            raise ValueError(f"{len(V)} vertices for a mesh of {like.n_vertices}")
+        attrs = getattr(like, "attributes", None)
+        if faces is None or attrs is not None:
+            faces = like.faces
+    if faces is None:
+        raise TypeError("save_mesh needs faces or like=mesh")
+    F = np.ascontiguousarray(faces, dtype=np.int64).reshape(-1, 3)
+    if attrs is not None:
+        data, warnings = write_with_attributes(fmt, V, attrs, props)
+    elif fmt == "ply":
+        data = _ply_bytes(V, F, props)
+    elif fmt in ("off", "obj"):
+        data = _text_bytes(V, F, fmt)
+    else:
+        data = _trimesh_bytes(V, F, fmt)
+    if gz:
+        # mtime=0: identical meshes give identical files
+        data = gzip.compress(data, mtime=0)
+    atomic_write(path, data)
+    return [f"{Path(path).name}: {w}" for w in warnings]
