@@ -207,9 +207,8 @@ def _ring_energy_kernel(n, r_min, r_max, edges, edge_ptr, edge_idx, edge_layer, 
 
 
 def _neighbourhoods(mesh: Mesh, w: np.ndarray, r_max: int):
-    """One BFS to r_max for every vertex (the engine's), without the solver-only extras."""
-    # the per-vertex regrouping (vdisk_*) serves the solver's right-hand side only
-    return build_neighbourhoods(mesh, w, r_max, transpose=False)
+    """One BFS to r_max for every vertex (the engine's)."""
+    return build_neighbourhoods(mesh, w, r_max)
 
 
 def _chunks(n: int) -> int:

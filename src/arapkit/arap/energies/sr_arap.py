@@ -26,10 +26,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...errors import InputError
-from .base import NeighbourhoodEnergy, rring_energy
+from .base import NeighbourhoodEnergy
+from .rring import rring_energy
+from .table import EnergyInfo, register_energy
 
 if TYPE_CHECKING:
-    from ..problem import EdgeGraph
+    from ..graph import EdgeGraph
 
 __all__ = ["DEFAULT_ALPHA", "check_alpha", "sr_arap_energy", "surface_area"]
 
@@ -75,5 +77,12 @@ def sr_arap_energy(graph: EdgeGraph, w: np.ndarray, alpha: float = DEFAULT_ALPHA
     coupling = (adj.indptr.astype(np.int64), adj.indices.astype(np.int64), rc_w)
     # |R_k - R_j|^2 = 6 - 2 tr(R_k R_j^T): the kernel's trace carries the second part
     rest = base.rest_term + 6.0 * float(rc_w.sum())
-    return replace(base, name="sr-arap", rest_term=rest, coupling=coupling, descent=False,
+    return replace(base, name="sr-arap", rest_term=rest, coupling=coupling,
                    options={"alpha": alpha})
+
+
+# the Jacobi sweep over the coupling is not a descent step (see the module docstring)
+register_energy(EnergyInfo(
+    "sr-arap",
+    lambda graph, w, weights_kind, rings, alpha=DEFAULT_ALPHA: sr_arap_energy(graph, w, alpha),
+    descent=False, needs_faces=True, options=("alpha",)))
