@@ -34,13 +34,15 @@ from typing import Any
 
 import numpy as np
 
-from ..arap.energies.base import ENERGIES
 from ..errors import Advice, InputError
 from ..mesh.weights import DEFAULT_WEIGHTS
+from ..methods.registry import method_names
 
 __all__ = ["DEFAULT_ENERGY", "ENERGIES", "DeformJob", "JobInputs", "PreparedJob", "job_report",
            "load_job_inputs", "method_description", "prepare_job", "save_result"]
 
+#: the methods of ``arapkit deform`` and its jobs (those the registry offers to the command line)
+ENERGIES = method_names("cli")
 #: r-ring ARAP, the default method (one of :data:`ENERGIES`, the methods this build can run)
 DEFAULT_ENERGY = ENERGIES[0]
 
