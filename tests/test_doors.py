@@ -2,10 +2,10 @@
 
 The matrix is generated from the method registry (:mod:`arapkit.methods.registry`: the
 methods, :data:`~arapkit.methods.registry.INTERFACES`,
-:data:`~arapkit.methods.registry.VOLUMETRIC_INTERFACES`) and the editor's
-:data:`arapkit.editor.state.METHODS`, so a newly registered method joins it and an interface
-that claims a method but cannot run it fails here. A cell either runs (exit 0, finite,
-deformed, handles met: to round-off for hard constraints, within the method's
+:data:`~arapkit.methods.registry.VOLUMETRIC_INTERFACES`) and the editor's selector
+(:func:`arapkit.editor.settings.solver_choices`), so a newly registered method joins it and
+an interface that claims a method but cannot run it fails here. A cell either runs (exit 0,
+finite, deformed, handles met: to round-off for hard constraints, within the method's
 ``handle_tol`` for soft ones) or is refused with its one-line message (exit 2 on the
 command line).
 """
@@ -102,10 +102,10 @@ def _expressible(v: Variant, interface: str) -> bool:
     return True
 
 
-def _editor_panel_methods() -> tuple[str, ...]:
-    from arapkit.editor.state import METHODS
+def _editor_panel_choices() -> list:
+    from arapkit.editor.settings import solver_choices
 
-    return METHODS
+    return [pytest.param(c, id=c.label) for c in solver_choices()]
 
 
 CELLS = [pytest.param(v, i, id=f"{v.id}@{i}") for v in _variants() for i in INTERFACES
@@ -238,19 +238,19 @@ def _batch(v: Variant, folder: Path, capsys) -> np.ndarray:
 
 
 def _editor(v: Variant, folder: Path, capsys) -> np.ndarray:
-    from arapkit.editor.state import METHODS, SolverSettings
+    from arapkit.editor.settings import SolverSettings, solver_choices
     from arapkit.editor.worker import SolveRequest, SolveWorker
 
     mesh, hs, _ = _case()
-    method = "volumetric" if v.volumetric else ("arap" if v.energy == "rring" else v.energy)
-    assert method in METHODS
+    assert any((c.method, c.volumetric) == (v.energy, v.volumetric) for c in solver_choices())
     updates = []
     w = SolveWorker(updates.append)
     w.start()
     try:
         painted = np.broadcast_to(_rings(v), (mesh.n_vertices,)).astype(np.int32)
         w.submit(SolveRequest(mesh, hs.indices, hs.targets, painted,
-                              SolverSettings(method=method, max_iter=1000)))
+                              SolverSettings(method=v.energy, volumetric=v.volumetric,
+                                             max_iter=1000)))
         assert w.wait_idle(300)
     finally:
         w.stop()
@@ -316,14 +316,15 @@ def test_cli_embedded_with_default_options_writes_its_report(folder, capsys):
     assert rep["method"] == {"energy": "embedded", "nodes": 200}
 
 
-@pytest.mark.parametrize("method", _editor_panel_methods())
-def test_every_editor_panel_method_solves(method: str):
-    """Each method of the editor's solver panel (Laplacian editing included) deforms."""
-    from arapkit.editor.state import SolverSettings
+@pytest.mark.parametrize("choice", _editor_panel_choices())
+def test_every_editor_panel_method_solves(choice):
+    """Each entry of the editor's method selector (Laplacian editing included) deforms."""
+    from arapkit.editor.settings import SolverSettings
     from arapkit.editor.worker import SolveRequest, SolveWorker
 
     mesh, hs, mixed = _case()
-    if method == "volumetric":
+    method = choice.method
+    if choice.volumetric:
         from arapkit.methods.volumetric import have_mesher
 
         if not have_mesher():
@@ -333,7 +334,8 @@ def test_every_editor_panel_method_solves(method: str):
     w.start()
     try:
         w.submit(SolveRequest(mesh, hs.indices, hs.targets, mixed,
-                              SolverSettings(method=method, max_iter=1000)))
+                              SolverSettings(method=method, volumetric=choice.volumetric,
+                                             max_iter=1000)))
         assert w.wait_idle(300)
     finally:
         w.stop()

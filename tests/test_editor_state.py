@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from arapkit.editor.state import CameraView, EditorState, Handle, raycast
+from arapkit.editor.geometry import CameraView, raycast
+from arapkit.editor.state import EditorState, Handle
 from arapkit.editor.views import face_groups, ring_labels
 from arapkit.editor.worker import SolveRequest, SolveWorker
 from arapkit.errors import InputError
@@ -246,6 +247,33 @@ def test_session_round_trip(st, tmp_path):
     assert np.array_equal(st2.rings, st.rings)
     assert st2.settings == st.settings
     assert a.name == "base"
+
+
+def test_old_session_method_names_load_and_save_as_the_one_name(st, tmp_path):
+    """Sessions of arapkit 0.1 say "arap" or "volumetric": read as r-ring ARAP, written new."""
+    from arapkit.editor.settings import SolverSettings
+    from arapkit.methods.registry import method
+
+    st.add_handle(np.arange(25), name="base", frozen=True)
+    for old, volumetric in (("arap", False), ("volumetric", True)):
+        d = json.loads(json.dumps(st.to_dict()))
+        d["solver"] = {"method": old, "weights": "cotan", "tol": 1e-4, "max_iter": 50,
+                       "live_max_iter": 8, "live_budget_ms": 60.0}  # no "volumetric" key then
+        path = tmp_path / f"{old}.json"
+        path.write_text(json.dumps(d))
+        st2 = EditorState(st.mesh)
+        st2.apply_dict(EditorState.read_session(path))
+        s = st2.settings
+        assert (s.method, s.volumetric) == ("rring", volumetric)
+        assert method(s.method).rigidity_map and s.tol == 1e-4 and s.max_iter == 50
+        saved = json.loads(st2.save_session(tmp_path / f"{old}-new.json").read_text())["solver"]
+        assert saved["method"] == "rring" and saved["volumetric"] is volumetric
+        assert SolverSettings.from_dict(saved) == s
+    # volumetric is offered only where the registry says the method has a volumetric form
+    with pytest.raises(InputError, match="no volumetric form"):
+        SolverSettings.from_dict({"method": "laplacian", "volumetric": True})
+    with pytest.raises(InputError, match="volumetric must be true or false"):
+        SolverSettings.from_dict({"volumetric": "yes"})
 
 
 def test_session_for_another_mesh_is_refused(st, tmp_path):

@@ -570,7 +570,7 @@ def test_session_uploads_through_the_app(tmp_path, st):
             widget.value = bad  # runs the page's callback, which reports and changes nothing
             assert app.state.settings == settings
             assert app.md_status.content.startswith("⚠")
-            app._quietly(lambda w=widget, v=old: setattr(w, "value", v))
+            app.quietly(lambda w=widget, v=old: setattr(w, "value", v))
     finally:
         app.stop()
 

@@ -4,13 +4,13 @@ the plain edge-graph problem, and the options' errors."""
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from cgal_oracle import build_driver, run_cgal
 from conftest import data_path
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
@@ -18,58 +18,6 @@ from arapkit.arap.problem import ARAPProblem
 from arapkit.arap.solve import arap_solve
 from arapkit.mesh.shapes import bar, bar_bend
 from arapkit.mesh.weights import _corner_cotangents, edge_weights
-
-CGAL_DRIVER = r"""
-// Test oracle: CGAL's Surface_mesh_deformation on the whole mesh with given handles.
-// usage: driver MESH.off HANDLES.txt ("vertex x y z" lines) TAG ALPHA ITERATIONS TOL OUT.txt
-#include <CGAL/Simple_cartesian.h>
-#include <CGAL/Surface_mesh.h>
-#include <CGAL/Surface_mesh_deformation.h>
-#include <fstream>
-#include <string>
-#include <vector>
-
-typedef CGAL::Simple_cartesian<double> K;
-typedef CGAL::Surface_mesh<K::Point_3> Mesh;
-typedef boost::graph_traits<Mesh>::vertex_descriptor VD;
-
-template <CGAL::Deformation_algorithm_tag TAG>
-int run(Mesh& m, const std::vector<int>& h, const std::vector<K::Point_3>& t, double alpha,
-        unsigned iters, double tol) {
-  CGAL::Surface_mesh_deformation<Mesh, CGAL::Default, CGAL::Default, TAG> d(m);
-  d.insert_roi_vertices(vertices(m).begin(), vertices(m).end());
-  for (int i : h) d.insert_control_vertex(VD(i));
-  if (!d.preprocess()) return 3;
-  for (std::size_t i = 0; i < h.size(); ++i) d.set_target_position(VD(h[i]), t[i]);
-  d.set_sre_arap_alpha(alpha);
-  d.deform(iters, tol);
-  return 0;
-}
-
-int main(int argc, char** argv) {
-  if (argc != 8) return 2;
-  Mesh m;
-  std::ifstream in(argv[1]);
-  if (!(in >> m)) return 4;
-  std::ifstream hf(argv[2]);
-  std::vector<int> h;
-  std::vector<K::Point_3> t;
-  int v;
-  double x, y, z;
-  while (hf >> v >> x >> y >> z) { h.push_back(v); t.emplace_back(x, y, z); }
-  std::string tag = argv[3];
-  double alpha = std::stod(argv[4]);
-  unsigned iters = std::stoul(argv[5]);
-  double tol = std::stod(argv[6]);
-  int rc = tag == "sre" ? run<CGAL::SRE_ARAP>(m, h, t, alpha, iters, tol)
-                        : run<CGAL::SPOKES_AND_RIMS>(m, h, t, alpha, iters, tol);
-  if (rc) return rc;
-  std::ofstream out(argv[7]);
-  out.precision(17);
-  for (VD vd : vertices(m)) out << m.point(vd) << "\n";
-  return 0;
-}
-"""
 
 
 def bend_cylinder(m: Mesh, degrees: float = 60.0):
@@ -158,27 +106,10 @@ def test_descent_methods_never_rise_on_the_bar(energy):
 
 @pytest.fixture(scope="session")
 def cgal_driver(tmp_path_factory) -> Path:
-    if not Path("/usr/include/CGAL/Surface_mesh_deformation.h").exists():
-        pytest.skip("CGAL headers not installed (apt-get install libcgal-dev libeigen3-dev)")
-    if not Path("/usr/include/eigen3").exists():
-        pytest.skip("Eigen 3 headers not installed (apt-get install libeigen3-dev)")
-    cxx = shutil.which(os.environ.get("CXX", "g++"))
-    if cxx is None:
-        pytest.skip("no C++ compiler to build the CGAL oracle")
-    d = tmp_path_factory.mktemp("cgal")
-    (d / "driver.cpp").write_text(CGAL_DRIVER)
-    subprocess.run([cxx, "-O1", "-std=c++17", "-DCGAL_EIGEN3_ENABLED", "-I/usr/include/eigen3",
-                    str(d / "driver.cpp"), "-o", str(d / "driver")], check=True, timeout=900,
-                   capture_output=True)
-    return d / "driver"
-
-
-def run_cgal(driver: Path, mesh_path: Path, h, T, tag: str, alpha: float, tmp: Path):
-    np.savetxt(tmp / "h.txt", np.column_stack([h, T]), fmt=["%d", "%.17g", "%.17g", "%.17g"])
-    out = tmp / f"out_{tag}.txt"
-    subprocess.run([str(driver), str(mesh_path), str(tmp / "h.txt"), tag, repr(alpha), "5000",
-                    "1e-13", str(out)], check=True, timeout=600)
-    return np.loadtxt(out)
+    driver = build_driver(tmp_path_factory.mktemp("cgal"))
+    if isinstance(driver, str):
+        pytest.skip(driver)
+    return driver
 
 
 @pytest.mark.parametrize("alpha", [0.02, 0.5])
@@ -204,6 +135,107 @@ def test_spokes_and_rims_matches_cgal(cgal_driver, cylinder, tmp_path):
     res = Deformer(m, h, weights="cotan", energy="spokes-and-rims").solve(T, tol=1e-12,
                                                                           max_iter=5000)
     assert np.abs(U - res.vertices).max() < 2e-3 * m.bounding_box_diagonal
+
+
+@pytest.fixture(scope="module")
+def obtuse_partial_roi(tmp_path_factory):
+    """A sheared, jittered bar (many obtuse corners, edges with both opposite angles obtuse)
+    posed as a ``.sel`` would be: the left end outside the ROI (status 0), the right end the
+    control vertices (status 2, turned 90 degrees and shifted), the rest the ROI (1)."""
+    from arapkit.io.fileio import save_mesh
+
+    b = bar(length=3.0, segments=(15, 3, 3))
+    rng = np.random.default_rng(1)
+    V = b.vertices.copy()
+    V[:, 0] += 0.6 * V[:, 1] + 0.03 * rng.standard_normal(len(V))
+    V[:, 1:] += 0.02 * rng.standard_normal((len(V), 2))
+    m = Mesh(V, b.faces, name="obtuse bar")
+    path = tmp_path_factory.mktemp("obtuse") / "obtuse.off"
+    save_mesh(path, V, m.faces)
+    x = b.vertices[:, 0]
+    outside, control = np.flatnonzero(x < 0.5), np.flatnonzero(x > 2.8)
+    th = np.radians(90)
+    Q = np.array([[1, 0, 0], [0, np.cos(th), -np.sin(th)], [0, np.sin(th), np.cos(th)]])
+    c = V[control].mean(axis=0)
+    moved = (V[control] - c) @ Q.T + c + [0.3, 0.0, 0.5]
+    roi = np.setdiff1d(np.arange(m.n_vertices), outside)
+    return m, path, outside, control, moved, roi
+
+
+# CGAL's problem in arapkit's terms, per CGAL tag: energy, weights, whether sr_roi is needed
+CGAL_POSED = {"sre": ("sr-arap", "cotan-clamped-each", True),
+              "arap": ("rring", "cotan-clamped-each", False),
+              "rims": ("spokes-and-rims", "cotan", False)}
+
+
+@pytest.mark.parametrize("tag", ["sre", "arap", "rims"])
+def test_cgal_problem_on_obtuse_mesh_with_partial_roi(cgal_driver, obtuse_partial_roi,
+                                                       tmp_path, tag):
+    m, path, outside, control, moved, roi = obtuse_partial_roi
+    cots = _corner_cotangents(m.vertices, m.faces)
+    assert (cots < 0).sum() > 200  # obtuse enough for the weightings to differ
+    # CGAL solves the ROI only; arapkit holds the vertices outside it as handles at rest
+    U = run_cgal(cgal_driver, path, control, moved, tag, 0.02, tmp_path, roi=roi,
+                 iterations=20000, tol=1e-14)
+    h = np.concatenate([outside, control])
+    T = np.concatenate([m.vertices[outside], moved])
+    energy, weights, needs_roi = CGAL_POSED[tag]
+    opts = {"sr_roi": roi} if needs_roi else {}
+    diag = m.bounding_box_diagonal
+    res = Deformer(m, h, weights=weights, energy=energy, **opts).solve(T, tol=1e-13,
+                                                                       max_iter=20000)
+    assert res.converged
+    # reached: 6e-11 (sre), 1.7e-7 (arap), 1e-7 (rims)
+    assert np.abs(U - res.vertices).max() < 1e-5 * diag
+    assert np.abs(U - m.vertices).max() > 0.1 * diag  # it really moved
+    # the default weighting, posed without the ROI, is another problem: 1.5e-3 to 1e-2 away
+    default = Deformer(m, h, energy=energy).solve(T, tol=1e-13, max_iter=20000)
+    assert np.abs(U - default.vertices).max() > 1e-3 * diag
+    if needs_roi:  # and CGAL's weights alone are not enough: 1.9e-3 away
+        whole = Deformer(m, h, weights=weights, energy=energy).solve(T, tol=1e-13,
+                                                                     max_iter=20000)
+        assert np.abs(U - whole.vertices).max() > 1e-3 * diag
+
+
+def test_sr_roi_coupling_is_cgals_region_of_solution():
+    """Brute force: with sr_roi the coupling keeps (k, j) iff both lie in the ROI or on its
+    one-ring, with CGAL's coefficient alpha A / (full degree of k)."""
+    m = bar(length=2.0, segments=(8, 2, 2))
+    x = m.vertices[:, 0]
+    roi = np.flatnonzero(x > 1.0)
+    h = np.flatnonzero((x <= 1.0) | (x > 1.9))
+    d = Deformer(m, h, energy="sr-arap", sr_alpha=0.3, sr_roi=roi, reorder=False)
+    indptr, indices, rc_w = d.problem.energy.coupling
+    got = {(k, int(j)): rc_w[p] for k in range(m.n_vertices)
+           for p, j in zip(range(indptr[k], indptr[k + 1]), indices[indptr[k]:indptr[k + 1]])}
+    nbrs = [set() for _ in range(m.n_vertices)]
+    for i, j in m.edges:
+        nbrs[i].add(int(j))
+        nbrs[j].add(int(i))
+    solved = set(roi.tolist()).union(*(nbrs[v] for v in roi))
+    V, F = m.vertices, m.faces
+    area = 0.5 * np.linalg.norm(np.cross(V[F[:, 1]] - V[F[:, 0]], V[F[:, 2]] - V[F[:, 0]]),
+                                axis=1).sum()
+    area /= d.problem.scale ** 2  # the problem lives in units of its own size
+    want = {(k, j): 0.3 * area / len(nbrs[k]) for k in range(m.n_vertices) for j in nbrs[k]
+            if k in solved and j in solved}
+    assert got.keys() == want.keys() and len(want) < 2 * len(m.edges)
+    assert all(got[key] == pytest.approx(want[key], rel=1e-12) for key in want)
+
+
+def test_sr_roi_errors():
+    m = bar(length=2.0, segments=(8, 2, 2))
+    x = m.vertices[:, 0]
+    roi = np.flatnonzero(x > 1.0)
+    h = np.flatnonzero((x <= 1.0) | (x > 1.9))
+    with pytest.raises(InputError, match=r"vertex 9 is outside sr_roi but not a handle"):
+        Deformer(m, h[h != 9], energy="sr-arap", sr_roi=roi)
+    with pytest.raises(InputError, match=rf"sr_roi: vertex {m.n_vertices} is out of range"):
+        Deformer(m, h, energy="sr-arap", sr_roi=[0, m.n_vertices])
+    with pytest.raises(InputError, match="sr_roi must be a non-empty list of vertex ids"):
+        Deformer(m, h, energy="sr-arap", sr_roi=[0.5])
+    with pytest.raises(InputError, match="sr_roi is an option of energy 'sr-arap', not 'rring'"):
+        Deformer(m, h, sr_roi=roi)
 
 
 def test_sr_alpha_zero_is_spokes_arap():
@@ -352,6 +384,16 @@ def test_cli_energy_option_runs_the_method(bar_case):
     assert rep["method"] == {"energy": "sr-arap", "sr_alpha": 0.05}
     ref = Deformer(m, h, energy="sr-arap", sr_alpha=0.05).solve(t)
     got = load_mesh(d / "sr.off").vertices
+    assert np.abs(got - ref.vertices).max() < 1e-6 * m.bounding_box_diagonal
+
+
+def test_cli_offers_cgal_weights(bar_case):
+    d, m, h, t = bar_case
+    proc = cli("deform", d / "bar.off", "--handles", d / "h.json", "-o", d / "each.off",
+               "--weights", "cotan-clamped-each", "-q")
+    assert proc.returncode == 0, proc.stderr
+    ref = Deformer(m, h, weights="cotan-clamped-each").solve(t)
+    got = load_mesh(d / "each.off").vertices
     assert np.abs(got - ref.vertices).max() < 1e-6 * m.bounding_box_diagonal
 
 

@@ -50,6 +50,41 @@ def test_obtuse_clamped_and_uniform():
         edge_weights(m, "cot")
 
 
+def brute_clamped_each(V, F) -> dict:
+    """Per corner: the angle by arccos, max(cot, 0) / 2 added to the edge it faces."""
+    w = {}
+    for f in F:
+        for c in range(3):
+            k, i, j = f[c], f[(c + 1) % 3], f[(c + 2) % 3]
+            a, b = V[i] - V[k], V[j] - V[k]
+            angle = np.arccos(a @ b / np.linalg.norm(a) / np.linalg.norm(b))
+            key = (min(i, j), max(i, j))
+            w[key] = w.get(key, 0.0) + 0.5 * max(1.0 / np.tan(angle), 0.0)
+    return w
+
+
+def test_cotan_clamped_each_brute_force():
+    # a jittered, sheared open grid: obtuse corners, edges facing two obtuse angles, boundary
+    rng = np.random.default_rng(3)
+    g = np.stack(np.meshgrid(np.arange(6.0), np.arange(5.0), indexing="ij"), -1).reshape(-1, 2)
+    V = np.column_stack([g[:, 0] + 0.9 * g[:, 1], g[:, 1], 0.2 * rng.standard_normal(len(g))])
+    V[:, :2] += 0.15 * rng.standard_normal((len(g), 2))
+    idx = np.arange(30).reshape(6, 5)
+    lo, hi = idx[:-1, :-1].ravel(), idx[1:, 1:].ravel()
+    F = np.concatenate([np.column_stack([lo, idx[1:, :-1].ravel(), hi]),
+                        np.column_stack([lo, hi, idx[:-1, 1:].ravel()])])
+    m = Mesh(V, F)
+    ref = brute_clamped_each(m.vertices, m.faces)
+    got = edge_weights(m, "cotan-clamped-each")
+    want = np.array([ref[tuple(e)] for e in m.edges.tolist()])
+    assert np.allclose(got, want, rtol=1e-12, atol=1e-14)
+    raw = edge_weights(m, "cotan")
+    both_obtuse = want == 0
+    assert both_obtuse.sum() >= 2 and (raw < 0).sum() > both_obtuse.sum()
+    # it differs from clamping the sum: cotan-clamped keeps a mixed edge's negative part
+    assert np.abs(edge_weights(m, "cotan-clamped") - want).max() > 1e-2
+
+
 def test_bar_weights_positive():
     # a box of right isosceles triangles: every cotangent is 0 or 1
     w = edge_weights(bar(), "cotan")

@@ -24,7 +24,7 @@ from arapkit.cli.common import (
     positive_int,
     warn,
 )
-from arapkit.errors import InputError
+from arapkit.errors import InputError, require_extra
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
@@ -97,6 +97,7 @@ def _slug(label: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit compare``; returns the exit status."""
+    require_extra("matplotlib", "plots", "arapkit compare")  # it always draws compare.png
     from arapkit.io.fileio import save_mesh
     from arapkit.methods.deformer import check_method
     from arapkit.plots.figures import save_figure

@@ -29,7 +29,7 @@ from arapkit.cli.common import (
     tolerance,
     warn,
 )
-from arapkit.errors import InputError, worded_for
+from arapkit.errors import InputError, require_extra, worded_for
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
@@ -243,6 +243,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_output_path(args.report, inputs, args.force, "report")
         outs.append(Path(args.report).resolve())
     if args.figure:
+        require_extra("matplotlib", "plots", "arapkit deform --figure")
         check_output_path(args.figure, inputs, args.force, "figure")
         check_figure_format(args.figure)
         outs.append(Path(args.figure).resolve())

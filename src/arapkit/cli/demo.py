@@ -29,7 +29,7 @@ from arapkit.cli.common import (
     note,
     positive_int,
 )
-from arapkit.errors import InputError
+from arapkit.errors import InputError, require_extra
 
 __all__ = ["PAPER_RINGS", "add_parser", "format_table", "run"]
 
@@ -168,9 +168,10 @@ def _row(label: Any, res) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit demo``; returns the exit status."""
+    require_extra("matplotlib", "plots", "arapkit demo")  # before any solving: it draws figures
     from arapkit.io.fileio import save_mesh, write_json
     from arapkit.mesh.shapes import bar, bar_bend, bar_two_materials
-    from arapkit.plots.figures import figures as plots
+    from arapkit.plots import figures as plots
 
     t_start = time.perf_counter()
     out = _prepare_out(args.out)

@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from arapkit.cli.common import add_example_epilog, port, ring_size, upload_mb
+from arapkit.errors import require_extra
 
 _DESCRIPTION = """\
 Start a local editor in the browser: pick handle regions (click or Shift+drag a rectangle),
@@ -170,6 +171,8 @@ def _up(text: str | None) -> str | None:
 
 def run(args: argparse.Namespace) -> int:
     """Start the editor and serve until Ctrl-C."""
+    # the editor serves with viser and colours energy with matplotlib's maps
+    require_extra(("viser", "matplotlib"), "editor", "arapkit edit")
     from arapkit.editor.app import EditorApp
     from arapkit.validate import host
 

@@ -38,7 +38,7 @@ from arapkit.cli.common import (
     load_mesh_checked,
     positive_int,
 )
-from arapkit.errors import InputError
+from arapkit.errors import InputError, require_extra
 from arapkit.io.fileio import load_numpy
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 from arapkit.validate import real_array
@@ -307,6 +307,7 @@ def _check_outputs(args: argparse.Namespace, inputs: list[str]) -> None:
         if mesh_format(args.ply)[0] != "ply":
             raise InputError(f"{args.ply}: --ply needs a .ply (or .ply.gz) file name")
     if args.figure:
+        require_extra("matplotlib", "plots", "arapkit learn --figure")
         check_output_path(args.figure, inputs, args.force, "figure")
         check_figure_format(args.figure)
     if args.energies:

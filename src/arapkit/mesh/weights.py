@@ -15,6 +15,13 @@ Weight kinds
   rest shape can drift, and the reduced system can be indefinite, in which case the solver
   stops with an :class:`~arapkit.errors.InputError` that names the remedy. Kept for the
   paper's experiments and for agreement with libigl.
+* ``"cotan-clamped-each"``: ``w_ij = (max(cot a_ij, 0) + max(cot b_ij, 0)) / 2``: every
+  cotangent is clamped at 0 *before* the two are summed, as CGAL's
+  ``Surface_mesh_deformation`` does for ``ORIGINAL_ARAP`` and ``SRE_ARAP``
+  (``CGAL::Weights::Cotangent_weight``). For porting from CGAL: it reproduces CGAL's problem
+  (``docs/methods.md``). Weights are >= 0 (E >= 0); an edge whose two opposite angles are
+  both obtuse gets weight 0 and drops out, where ``"cotan-clamped"`` keeps it with a small
+  positive weight (it clamps the *sum*, and only below a floor).
 * ``"uniform"``: ``w_ij = 1``.
 * An array of per-edge weights aligned with ``mesh.edges`` (finite and > 0), for edge graphs
   whose weights come from elsewhere (e.g. the tetrahedral weights of
@@ -38,7 +45,7 @@ __all__ = [
     "voronoi_areas",
 ]
 
-WEIGHT_KINDS = ("cotan", "cotan-clamped", "uniform")
+WEIGHT_KINDS = ("cotan", "cotan-clamped", "cotan-clamped-each", "uniform")
 #: the weighting every interface uses unless the user names another (see docs/weights.md)
 DEFAULT_WEIGHTS = "cotan-clamped"
 #: what messages suggest when raw cotangent weights misbehave
@@ -66,10 +73,11 @@ def _corner_cotangents(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     return cots
 
 
-def cotangent_weights(mesh: Mesh) -> np.ndarray:
+def cotangent_weights(mesh: Mesh, clamp_corners: bool = False) -> np.ndarray:
     """Cotangent weight ``(cot a + cot b) / 2`` of every edge in ``mesh.edges``.
 
-    Boundary edges have one opposite angle and get half its cotangent.
+    Boundary edges have one opposite angle and get half its cotangent. With
+    ``clamp_corners`` every cotangent is first raised to at least 0 (CGAL's weights).
 
     Examples
     --------
@@ -78,9 +86,14 @@ def cotangent_weights(mesh: Mesh) -> np.ndarray:
     >>> m = Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]])
     >>> np.round(cotangent_weights(m), 6).tolist()   # edges (0,1), (0,2), (1,2)
     [0.5, 0.5, 0.0]
+    >>> obtuse = Mesh([[0, 0, 0], [2, 0, 0], [1, 0.2, 0]], [[0, 1, 2]])
+    >>> float(cotangent_weights(obtuse, clamp_corners=True)[0])  # (0,1) faces the obtuse corner
+    0.0
     """
     F = mesh.faces
     cots = _corner_cotangents(mesh.vertices, F)
+    if clamp_corners:
+        cots = np.maximum(cots, 0.0)
     # the edge opposite corner c is face edge c+1, from corner c+1 to corner c+2
     opposite = np.roll(mesh.face_edges, -1, axis=1)
     return np.bincount(opposite.ravel(), 0.5 * cots.ravel(), minlength=len(mesh.edges))
@@ -92,8 +105,9 @@ def edge_weights(mesh: Mesh, kind: str | np.ndarray = DEFAULT_WEIGHTS) -> np.nda
     Parameters
     ----------
     mesh : Mesh
-    kind : {"cotan", "cotan-clamped", "uniform"} or (len(mesh.edges),) array
-        A policy name, or the weights themselves (checked: finite, > 0, one per edge).
+    kind : {"cotan", "cotan-clamped", "cotan-clamped-each", "uniform"} or array
+        A policy name (see the module's docstring), or the weights themselves (checked:
+        finite, > 0, one per edge of ``mesh.edges``).
 
     Examples
     --------
@@ -111,7 +125,7 @@ def edge_weights(mesh: Mesh, kind: str | np.ndarray = DEFAULT_WEIGHTS) -> np.nda
         return np.ones(len(mesh.edges))
     if kind not in WEIGHT_KINDS:
         raise InputError(f"unknown weights '{kind}' (choose one of {', '.join(WEIGHT_KINDS)})")
-    w = cotangent_weights(mesh)
+    w = cotangent_weights(mesh, clamp_corners=kind == "cotan-clamped-each")
     if kind == "cotan-clamped":
         floor = CLAMP_FRACTION * max(float(np.mean(np.abs(w))), 1e-300)
         w = np.maximum(w, floor)

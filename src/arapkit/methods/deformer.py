@@ -72,12 +72,14 @@ register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP",
                               interfaces=frozenset(INTERFACES) - {"compare"}))
 register(_local_global_method(
     "sr-arap", "SR-ARAP",
-    options={"sr_alpha": MethodOption("alpha", DEFAULT_ALPHA, check_alpha)},
+    # sr_roi's vertex ids are checked where the mesh is known (make_energy)
+    options={"sr_alpha": MethodOption("alpha", DEFAULT_ALPHA, check_alpha),
+             "sr_roi": MethodOption("roi", None, lambda roi: roi)},
     interfaces=frozenset(INTERFACES) - {"torch"},
     why_not={"torch": "its rotation coupling has no per-step fixed point"}))
 
 
-def check_method(energy: str, sr_alpha=None, nodes=None) -> dict:
+def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None) -> dict:
     """Validate a method name and its options; return the method's options.
 
     Examples
@@ -89,13 +91,15 @@ def check_method(energy: str, sr_alpha=None, nodes=None) -> dict:
     if energy not in names:
         raise InputError(f"unknown energy '{energy}' (use one of {', '.join(names)})")
     info = method(energy)
-    given = {"sr_alpha": sr_alpha, "nodes": nodes}
+    given = {"sr_alpha": sr_alpha, "nodes": nodes, "sr_roi": sr_roi}
     for name, value in given.items():
         if value is not None and name not in info.options:
             owner = next(m.name for m in methods("library") if name in m.options)
             raise InputError(f"{name} is an option of energy '{owner}', not '{energy}'")
-    return {opt.key: opt.check(opt.default if given.get(name) is None else given[name])
-            for name, opt in info.options.items()}
+    options = {opt.key: opt.check(opt.default if given.get(name) is None else given[name])
+               for name, opt in info.options.items()}
+    # an option without a default is left out unless given
+    return {key: value for key, value in options.items() if value is not None}
 
 
 def _refuse_acceleration(info: MethodInfo, remedy: str = "") -> None:
@@ -113,7 +117,7 @@ def register_variant(flag: str, cls: type) -> type:
     """Make ``Deformer(..., <flag>=True)`` return ``cls(mesh, handles, rings, **options)``.
 
     ``cls`` takes the Deformer's keyword options, less the method's (``energy``,
-    ``sr_alpha``, ``nodes``), which :class:`Deformer` checks first.
+    ``sr_alpha``, ``sr_roi``, ``nodes``), which :class:`Deformer` checks first.
 
     Examples
     --------
@@ -134,6 +138,16 @@ def _rows(ptr: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return new_ptr, idx
 
 
+def _check_outside_roi_is_held(mesh: Mesh, roi, handles) -> None:
+    """CGAL keeps the vertices outside its ROI where they are: here they must be handles."""
+    loose = np.ones(mesh.n_vertices, dtype=bool)
+    loose[np.asarray(roi)] = False
+    loose[np.asarray(handles, dtype=np.int64)] = False
+    if loose.any():
+        raise InputError(f"{mesh.name}: vertex {int(np.flatnonzero(loose)[0])} is outside "
+                         "sr_roi but not a handle (hold every vertex outside the ROI)")
+
+
 class Deformer:
     """ARAP deformer: r-ring rigidity (default) or another method on the same handles.
 
@@ -145,7 +159,7 @@ class Deformer:
     rings : int or (n,) int
         Neighbourhood size r per vertex (1 = standard ARAP; larger = stiffer). Only for
         ``energy="rring"``.
-    weights : {"cotan", "cotan-clamped", "uniform"}
+    weights : {"cotan", "cotan-clamped", "cotan-clamped-each", "uniform"}
         Edge weights (see :mod:`arapkit.mesh.weights`).
     energy : {"rring", "spokes-and-rims", "sr-arap", "embedded"}
         The method (see ``docs/methods.md``): r-ring ARAP (Chen et al. 2017),
@@ -154,6 +168,12 @@ class Deformer:
     sr_alpha : float, optional
         SR-ARAP's rotation-smoothness weight (default 0.02, CGAL's), scaled by the surface
         area as CGAL does.
+    sr_roi : (k,) int, optional
+        SR-ARAP only: pose CGAL's problem for a partial region of interest (its vertex ids,
+        handles included; a ``.sel`` file's statuses 1 and 2). Vertices outside it must be
+        handles (held at rest). Rotations are then coupled only within the ROI and its
+        one-ring, as in CGAL's ``Surface_mesh_deformation``; without it every vertex's
+        rotation is coupled to all its neighbours' (``docs/methods.md``).
     nodes : int, optional
         Embedded deformation's graph size (default 200, at most the vertex count).
     tol : float
@@ -210,7 +230,8 @@ class Deformer:
                 raise InputError("density is an option of volumetric=True")
             return super().__new__(cls)
         energy = options.pop("energy", "rring")
-        check_method(energy, options.pop("sr_alpha", None), options.pop("nodes", None))
+        check_method(energy, options.pop("sr_alpha", None), options.pop("nodes", None),
+                     options.pop("sr_roi", None))
         if not method(energy).volumetric:
             raise InputError(f"volumetric=True runs r-ring ARAP; energy '{energy}' is for "
                              "surfaces")
@@ -229,6 +250,7 @@ class Deformer:
         density: float | None = None,
         energy: str = "rring",
         sr_alpha: float | None = None,
+        sr_roi=None,
         nodes: int | None = None,
         tol: float = 1e-3,
         max_iter: int = 1000,
@@ -240,7 +262,7 @@ class Deformer:
         device: str = "cpu",
     ) -> None:
         self.device = check_device(device)
-        options = check_method(energy, sr_alpha, nodes)
+        options = check_method(energy, sr_alpha, nodes, sr_roi)
         info = method(energy)
         self.mesh = mesh
         self.energy = energy
@@ -271,6 +293,8 @@ class Deformer:
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
             reorder=reorder, **options)
         self._rings = self.problem.energy.rings[self.problem.iperm]
+        if sr_roi is not None:
+            _check_outside_roi_is_held(mesh, sr_roi, handles)
         self.backend = make_backend(self.problem, self.device)
         self._weight_notes = self._check_rest_is_minimum()
 

@@ -64,7 +64,7 @@ class LaplacianEditor:
     ----------
     mesh : Mesh
     handles : (h,) int
-    weights : {"cotan", "cotan-clamped", "uniform"}
+    weights : {"cotan", "cotan-clamped", "cotan-clamped-each", "uniform"}
     omega : float, optional
         Soft-constraint weight; ``None`` (default) means hard constraints.
 

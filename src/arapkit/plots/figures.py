@@ -1,10 +1,8 @@
-"""Headless matplotlib figures: shaded meshes coloured by energy or rigidity, energy curves.
+"""Headless figures: shaded meshes coloured by energy or rigidity, energy curves.
 
-Meshes are drawn as flat-shaded 2-D polygons in an orthographic view, sorted back to
-front (painter's algorithm), which is much faster than ``mplot3d`` and looks the same for
-the closed and open surfaces arapkit deforms. Meshes with more faces than ``max_faces`` are
-first simplified by vertex clustering on a regular grid, so a 100K- or 1M-face mesh draws in
-about the time of a ``max_faces`` one.
+Each figure is a :class:`matplotlib.figure.Figure` drawn by :mod:`arapkit.plots.render` (flat
+shading, painter's algorithm, display simplification of large meshes), built without pyplot:
+importing this module never changes Matplotlib's backend. :func:`save_figure` writes one.
 
 Views are upright: the up axis is :func:`arapkit.mesh.orientation.guess_up`'s guess unless
 ``up`` is given, and ``view`` picks *front* (default), *side*, *top* or *iso* (see
@@ -14,7 +12,6 @@ Views are upright: the up axis is :func:`arapkit.mesh.orientation.guess_up`'s gu
 
 Examples
 --------
->>> import numpy as np
 >>> from arapkit.plots.figures import energy_curves_figure
 >>> fig = energy_curves_figure({"r = 1": [1.0, 0.5, 0.4]})
 >>> len(fig.axes)
@@ -24,22 +21,40 @@ Examples
 from __future__ import annotations
 
 import os
+import sys
 from collections.abc import Mapping, Sequence
 
-import matplotlib
+from arapkit.errors import InputError, require_extra
 
-from arapkit.mesh.orientation import view_frame
-from arapkit.plots.colors import ENERGY_CMAP, ring_rgb
+# one line naming the extra instead of a bare "No module named 'matplotlib'"
+require_extra("matplotlib", "plots", "arapkit.plots")
 
-matplotlib.use("Agg")  # headless: never needs a display
-
-import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
-from matplotlib.collections import PolyCollection  # noqa: E402
 from matplotlib.colors import BoundaryNorm, Colormap, ListedColormap, Normalize  # noqa: E402
 from matplotlib.figure import Figure  # noqa: E402
-from matplotlib.ticker import FuncFormatter, MaxNLocator  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
+from arapkit.io.fileio import atomic_open, check_figure_format  # noqa: E402
+from arapkit.mesh.orientation import view_frame  # noqa: E402
+from arapkit.plots.colors import ENERGY_CMAP  # noqa: E402
+from arapkit.plots.render import (  # noqa: E402
+    DEFAULT_MAX_FACES,
+    FIXED_COLOR,
+    MOVED_COLOR,
+    REST_COLOR,
+    cluster_simplify,
+    colorbar,
+    colormap,
+    mark,
+    new_figure,
+    render_mesh,
+    rings_colormap,
+    value_norm,
+    view_basis,
+)
+
+# the renderer's names stay importable from here, where they lived before the split
 __all__ = [
     "DEFAULT_MAX_FACES",
     "ENERGY_CMAP",
@@ -57,286 +72,8 @@ __all__ = [
     "view_basis",
 ]
 
-#: Faces drawn per panel before the mesh is simplified for display.
-DEFAULT_MAX_FACES = 40_000
-_MAX_MARKERS = 2_000
-_REST_COLOR = np.array([0.78, 0.80, 0.84])
-_FIXED_COLOR = np.array([0.15, 0.15, 0.35])
-_MOVED_COLOR = np.array([0.85, 0.15, 0.10])
+# handle sets up to this size are also drawn as dots (larger ones only paint their faces)
 _FEW_HANDLES = 100
-
-
-# --------------------------------------------------------------------------- view and shading
-
-
-def _principal_axes(points: np.ndarray) -> np.ndarray:
-    """Rows: principal directions of ``points``, largest spread first, with fixed signs."""
-    P = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    C = np.cov((P - P.mean(0)).T) if len(P) > 1 else np.eye(3)
-    _, vecs = np.linalg.eigh(C)  # ascending eigenvalues
-    axes = vecs[:, ::-1].T.copy()
-    for k in range(3):
-        # eigenvector signs are arbitrary: fix them so repeated calls agree
-        if axes[k][np.argmax(np.abs(axes[k]))] < 0:
-            axes[k] = -axes[k]
-    return axes
-
-
-def view_basis(
-    points: np.ndarray,
-    elev: float = 20.0,
-    azim: float = -30.0,
-    right: np.ndarray | None = None,
-) -> np.ndarray:
-    """Orthonormal view basis (rows: screen right, screen up, towards the viewer).
-
-    The viewer looks along the direction of least spread of ``points`` (so a bent bar is
-    seen face-on), with ``right`` (default: the longest direction of ``points``) horizontal,
-    then the view is tilted by ``elev`` and ``azim`` degrees so that depth stays readable.
-
-    Parameters
-    ----------
-    points : (n, 3)
-        All shapes that will be drawn with this basis.
-    elev, azim : float
-        Tilt about the screen's horizontal and vertical axes, in degrees.
-    right : (3,), optional
-        Direction to show horizontally, e.g. the long axis of the rest shape.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> B = view_basis(np.random.default_rng(0).normal(size=(50, 3)) * [5, 2, 0.1], 0, 0)
-    >>> np.round(np.abs(B[2]), 2).tolist()  # looks along z, the thinnest direction
-    [0.0, 0.0, 1.0]
-    """
-    axes = _principal_axes(points)
-    towards = axes[2]
-    if right is not None:
-        r = np.asarray(right, dtype=np.float64)
-        r = r - (r @ towards) * towards
-        if np.linalg.norm(r) > 1e-9 * max(np.linalg.norm(right), 1e-300):
-            axes[0] = r / np.linalg.norm(r)
-    B = np.stack([axes[0], np.cross(towards, axes[0]), towards])
-    a, e = np.radians(azim), np.radians(elev)
-    Ry = np.array([[np.cos(a), 0, np.sin(a)], [0, 1, 0], [-np.sin(a), 0, np.cos(a)]])
-    Rx = np.array([[1, 0, 0], [0, np.cos(e), -np.sin(e)], [0, np.sin(e), np.cos(e)]])
-    return Rx @ Ry @ B
-
-
-def cluster_simplify(
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    max_faces: int,
-    values: np.ndarray | None = None,
-    reduce: str = "mean",
-) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    """Simplify a mesh for display by merging the vertices in each cell of a regular grid.
-
-    The grid is refined until the simplified mesh has at most ``max_faces`` faces; per-vertex
-    ``values`` are averaged over each cell (``reduce="mean"``) or take the cell's largest
-    value (``reduce="max"``, for labels that must not vanish). Meshes already small enough are
-    returned as is.
-
-    Returns
-    -------
-    vertices, faces, values
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> from arapkit.plots.figures import cluster_simplify
-    >>> V = np.random.default_rng(1).random((3000, 3)); F = np.arange(3000).reshape(-1, 3)
-    >>> len(cluster_simplify(V, F, 300)[1]) <= 300
-    True
-    """
-    V = np.asarray(vertices, dtype=np.float64)
-    F = np.asarray(faces, dtype=np.int64)
-    if len(F) <= max_faces:
-        return V, F, values
-    lo, span = V.min(0), np.ptp(V, axis=0).max() or 1.0
-    # a surface with g cells per side occupies roughly g^2 cells, each giving ~2 triangles
-    g = max(int(np.sqrt(max_faces / 2.0)), 2)
-    while True:
-        cell = np.floor((V - lo) / span * (g - 1e-9)).astype(np.int64)
-        key = (cell[:, 0] * g + cell[:, 1]) * g + cell[:, 2]
-        uniq, label = np.unique(key, return_inverse=True)
-        G = label[F]
-        keep = (G[:, 0] != G[:, 1]) & (G[:, 1] != G[:, 2]) & (G[:, 0] != G[:, 2])
-        G = G[keep]
-        # drop faces that collapse onto the same three cells, whatever their orientation
-        _, first = np.unique(np.sort(G, axis=1), axis=0, return_index=True)
-        G = G[np.sort(first)]
-        if len(G) <= max_faces or g <= 2:
-            break
-        g = max(int(g * np.sqrt(max_faces / len(G)) * 0.95), 2)
-    count = np.bincount(label, minlength=len(uniq)).astype(np.float64)
-    Vs = np.stack([np.bincount(label, V[:, k], len(uniq)) for k in range(3)], 1) / count[:, None]
-    vals = None
-    if values is not None and reduce == "max":
-        vals = np.full(len(uniq), -np.inf)
-        np.maximum.at(vals, label, np.asarray(values, float))
-    elif values is not None:
-        vals = np.bincount(label, np.asarray(values, float), len(uniq)) / count
-    return Vs, G, vals
-
-
-def render_mesh(
-    ax: plt.Axes,
-    vertices: np.ndarray,
-    faces: np.ndarray,
-    values: np.ndarray | None = None,
-    *,
-    basis: np.ndarray | None = None,
-    cmap: str | Colormap = ENERGY_CMAP,
-    norm: Normalize | None = None,
-    max_faces: int = DEFAULT_MAX_FACES,
-    color: Sequence[float] | None = None,
-    reduce: str = "mean",
-) -> Normalize | None:
-    """Draw a flat-shaded mesh into ``ax``, optionally coloured by per-vertex ``values``.
-
-    Parameters
-    ----------
-    ax : matplotlib Axes (2-D)
-    vertices : (n, 3), faces : (m, 3)
-    values : (n,) float, optional
-        Per-vertex scalar; each face takes the mean of its corners.
-    basis : (3, 3), optional
-        View basis from :func:`arapkit.mesh.orientation.view_frame` (default: its upright front
-        view of ``vertices``). Pass the same basis to several panels to compare shapes.
-    cmap, norm : colour map and normalisation for ``values``; ``norm`` defaults to
-        ``[0, 99th percentile]`` so a few extreme faces do not wash out the rest.
-    max_faces : int
-        Larger meshes are simplified with :func:`cluster_simplify` first.
-    color : RGB, optional
-        Uniform colour when ``values`` is None.
-    reduce : {"mean", "max"}
-        How a face (and a display-simplification cell) combines its corners' values; "max"
-        suits labels such as "is a handle".
-
-    Returns
-    -------
-    The normalisation used (None without values), for a colour bar.
-
-    Examples
-    --------
-    >>> import numpy as np, matplotlib.pyplot as plt
-    >>> fig, ax = plt.subplots()
-    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]); F = np.array([[0, 1, 2]])
-    >>> render_mesh(ax, V, F, np.array([0.0, 1, 2])).vmax > 0
-    True
-    """
-    V, F, vals = cluster_simplify(vertices, faces, max_faces, values, reduce)
-    B = view_frame(V)[0] if basis is None else np.asarray(basis)
-    P = V @ B.T  # screen x, screen y, depth (towards viewer)
-    tri = P[F]
-    normals = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    lengths = np.linalg.norm(normals, axis=1)
-    # two-sided headlight shading: open surfaces show their back faces too
-    shade = 0.35 + 0.65 * np.abs(normals[:, 2]) / np.where(lengths > 0, lengths, 1.0)
-    if vals is not None:
-        corner = np.asarray(vals, dtype=np.float64)[F]
-        fv = corner.max(axis=1) if reduce == "max" else corner.mean(axis=1)
-        if norm is None:
-            norm = value_norm([fv])
-        rgb = plt.get_cmap(cmap)(norm(fv))[:, :3]
-    else:
-        rgb = np.tile(np.asarray(color if color is not None else _REST_COLOR), (len(F), 1))
-    rgb = np.clip(rgb * shade[:, None], 0.0, 1.0)
-    order = np.argsort(tri[:, :, 2].mean(axis=1), kind="stable")  # back to front
-    coll = PolyCollection(
-        tri[order, :, :2], facecolors=rgb[order], edgecolors="none", antialiased=False
-    )
-    ax.add_collection(coll)
-    _frame(ax, P[:, :2])
-    return norm
-
-
-def value_norm(values: Sequence[np.ndarray]) -> Normalize:
-    """One colour scale for several arrays: [min(0, lowest), 99th percentile of all].
-
-    Examples
-    --------
-    >>> n = value_norm([np.zeros(999), np.ones(1) * 1e6])   # one spike does not set the scale
-    >>> n.vmin, n.vmax
-    (0.0, 1.0)
-    """
-    finite = np.concatenate([np.ravel(v) for v in values]).astype(np.float64)
-    finite = finite[np.isfinite(finite)]
-    hi = float(np.percentile(finite, 99)) if finite.size else 1.0
-    lo = min(0.0, float(finite.min())) if finite.size else 0.0
-    return Normalize(lo, hi if hi > lo else lo + 1.0)
-
-
-def _frame(ax: plt.Axes, xy: np.ndarray) -> None:
-    lo, hi = xy.min(0), xy.max(0)
-    pad = 0.04 * max(float(np.max(hi - lo)), 1e-12)
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
-    ax.set_aspect("equal")
-    ax.set_axis_off()
-
-
-def _mark(ax: plt.Axes, points: np.ndarray, basis: np.ndarray, color, label: str) -> None:
-    """Scatter (a deterministic subsample of) ``points`` on top of a rendered mesh."""
-    if len(points) == 0:
-        return
-    step = max(1, len(points) // _MAX_MARKERS)
-    xy = np.asarray(points)[::step] @ basis[:2].T
-    ax.scatter(xy[:, 0], xy[:, 1], s=6, color=color, edgecolors="none", label=label, zorder=3)
-
-
-def _colorbar(fig: Figure, ax, norm: Normalize, cmap, label: str) -> None:
-    sm = plt.cm.ScalarMappable(norm=norm, cmap=cmap)
-    kwargs: dict = {}
-    if isinstance(norm, BoundaryNorm):
-        # discrete levels (r values): equal-width bins labelled at their centres
-        b = np.asarray(norm.boundaries, dtype=np.float64)
-        kwargs = {"spacing": "uniform", "ticks": (b[:-1] + b[1:]) / 2}
-    cb = fig.colorbar(sm, ax=ax, orientation="horizontal", fraction=0.05, pad=0.02, **kwargs)
-    if isinstance(norm, BoundaryNorm):
-        # rings_colormap puts each level's lower bound at level - 0.5
-        cb.set_ticklabels([f"{v + 0.5:g}" for v in norm.boundaries[:-1]])
-    else:
-        # few ticks: long labels such as 0.00025 would otherwise run into each other
-        # and no "1e-5" offset text, which lands on the label
-        cb.locator = MaxNLocator(nbins=4)
-        cb.formatter = FuncFormatter(lambda v, _: f"{v:.3g}")
-        cb.update_ticks()
-    cb.set_label(label, fontsize=8)
-    cb.ax.tick_params(labelsize=7)
-
-
-def rings_colormap(
-    rings: np.ndarray, levels: Sequence[int] | None = None
-) -> tuple[Colormap, BoundaryNorm, np.ndarray]:
-    """Discrete colour map for a rigidity map: one bin per r, coloured as everywhere else.
-
-    Colours come from :data:`arapkit.plots.colors.RING_COLORS` (1 blue ... 6 and above red, the
-    editor's colours), so r = 2 has the same colour in every figure.
-
-    Parameters
-    ----------
-    rings : (n,) int
-    levels : the r values to give a bin (default: the distinct values of ``rings``).
-
-    Returns
-    -------
-    cmap, norm, levels
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> rings_colormap(np.array([2, 6, 6]))[2].tolist()
-    [2, 6]
-    """
-    if levels is None:
-        levels = np.unique(np.asarray(rings, dtype=np.int64))
-    levels = np.asarray(levels, dtype=np.int64)
-    bounds = np.concatenate([levels - 0.5, [levels[-1] + 0.5]])
-    colors = np.concatenate([ring_rgb(levels) / 255.0, np.ones((len(levels), 1))], axis=1)
-    return ListedColormap(colors), BoundaryNorm(bounds, len(levels)), levels
 
 
 def _camera(points: np.ndarray, view: str, up: str | None) -> np.ndarray:
@@ -401,7 +138,7 @@ def deformation_figure(
     fixed = np.zeros(len(handles), bool) if fixed_mask is None else np.asarray(fixed_mask, bool)
     varying = rings is not None and np.unique(rings).size > 1
     n_panels = 4 if varying else 3
-    fig = plt.figure(figsize=(4.0 * n_panels, 4.2), dpi=110, layout="constrained")
+    fig = new_figure(figsize=(4.0 * n_panels, 4.2), dpi=110, layout="constrained")
     axes = fig.subplots(1, n_panels, width_ratios=[1.0] * (n_panels - 1) + [0.9])
     basis = _camera(rest, view, up)
 
@@ -410,7 +147,7 @@ def deformation_figure(
     labels = np.zeros(len(rest))
     labels[handles[fixed]] = 1.0
     labels[handles[~fixed]] = 2.0
-    hcmap = ListedColormap([_REST_COLOR, _FIXED_COLOR, _MOVED_COLOR])
+    hcmap = ListedColormap([REST_COLOR, FIXED_COLOR, MOVED_COLOR])
     hnorm = BoundaryNorm([-0.5, 0.5, 1.5, 2.5], 3)
     render_mesh(
         axes[0],
@@ -424,14 +161,12 @@ def deformation_figure(
         reduce="max",
     )
     if len(handles) <= _FEW_HANDLES:
-        _mark(axes[0], rest[handles[fixed]], basis, _FIXED_COLOR, "fixed")
-        _mark(axes[0], rest[handles[~fixed]], basis, _MOVED_COLOR, "moved")
-        _mark(axes[1], targets[~fixed], basis, _MOVED_COLOR, "targets")
+        mark(axes[0], rest[handles[fixed]], basis, FIXED_COLOR, "fixed")
+        mark(axes[0], rest[handles[~fixed]], basis, MOVED_COLOR, "moved")
+        mark(axes[1], targets[~fixed], basis, MOVED_COLOR, "targets")
     axes[0].set_title("rest shape and handles", fontsize=9)
     if len(handles):
-        from matplotlib.patches import Patch
-
-        kinds = [("fixed", _FIXED_COLOR, fixed.any()), ("moved", _MOVED_COLOR, (~fixed).any())]
+        kinds = [("fixed", FIXED_COLOR, fixed.any()), ("moved", MOVED_COLOR, (~fixed).any())]
         axes[0].legend(
             handles=[Patch(color=c, label=k) for k, c, present in kinds if present],
             loc="upper center",
@@ -446,7 +181,7 @@ def deformation_figure(
         max_faces=max_faces,
     )
     axes[1].set_title("deformed: per-vertex energy", fontsize=9)
-    _colorbar(fig, axes[1], norm, ENERGY_CMAP, "per-vertex energy (clipped at 99th percentile)")
+    colorbar(fig, axes[1], norm, ENERGY_CMAP, "per-vertex energy (clipped at 99th percentile)")
 
     if varying:
         cmap, rnorm, levels = rings_colormap(rings)
@@ -454,7 +189,7 @@ def deformation_figure(
             axes[2], deformed, faces, rings, basis=basis, cmap=cmap, norm=rnorm, max_faces=max_faces
         )
         axes[2].set_title("deformed: rigidity r", fontsize=9)
-        _colorbar(fig, axes[2], rnorm, cmap, "r (rings)")
+        colorbar(fig, axes[2], rnorm, cmap, "r (rings)")
 
     _energy_axes(axes[-1], {"": history})
     if title:
@@ -462,7 +197,7 @@ def deformation_figure(
     return fig
 
 
-def _energy_axes(ax: plt.Axes, histories: Mapping[str, Sequence[float]]) -> None:
+def _energy_axes(ax, histories: Mapping[str, Sequence[float]]) -> None:
     for label, h in histories.items():
         h = np.asarray(h, dtype=np.float64)
         if h.size:
@@ -489,7 +224,8 @@ def energy_curves_figure(histories: Mapping[str, Sequence[float]]) -> Figure:
     >>> len(fig.axes[0].lines)
     2
     """
-    fig, ax = plt.subplots(figsize=(5.0, 3.6), dpi=110, layout="constrained")
+    fig = new_figure(figsize=(5.0, 3.6), dpi=110, layout="constrained")
+    ax = fig.subplots()
     _energy_axes(ax, histories)
     return fig
 
@@ -503,7 +239,8 @@ def iterations_figure(rings: Sequence[int], iterations: Sequence[int]) -> Figure
     >>> fig.axes[0].get_xlabel()
     'ring size r'
     """
-    fig, ax = plt.subplots(figsize=(4.6, 3.4), dpi=110, layout="constrained")
+    fig = new_figure(figsize=(4.6, 3.4), dpi=110, layout="constrained")
+    ax = fig.subplots()
     ax.plot(list(rings), list(iterations), "o-", lw=1.5)
     for r, it in zip(rings, iterations, strict=True):
         ax.annotate(str(it), (r, it), textcoords="offset points", xytext=(4, 4), fontsize=7)
@@ -551,7 +288,7 @@ def series_figure(
     """
     ncols = ncols or len(panels)
     nrows = -(-len(panels) // ncols)
-    fig = plt.figure(figsize=(3.0 * ncols, 3.3 * nrows), dpi=110, layout="constrained")
+    fig = new_figure(figsize=(3.0 * ncols, 3.3 * nrows), dpi=110, layout="constrained")
     axes = np.atleast_1d(fig.subplots(nrows, ncols)).ravel()
     basis = _camera(panels[0][1], view, up)
     F = np.asarray(faces)
@@ -567,7 +304,7 @@ def series_figure(
     if valued:
         clip = ", clipped at the 99th percentile" if ours else ""
         label = f"{colorbar_label} (one scale for all panels{clip})"
-        _colorbar(fig, list(axes[: len(panels)]), norm, cmap, label)
+        colorbar(fig, list(axes[: len(panels)]), norm, cmap, label)
     return fig
 
 
@@ -599,15 +336,15 @@ def rings_figure(
     cmap, norm, _ = rings_colormap(levels, levels)
     # at least 8 inches wide: the title (file name, counts, omega) must fit one view too
     width = max(5.0 * len(views), 8.0)
-    fig, axes = plt.subplots(1, len(views), figsize=(width, 3.8), squeeze=False,
-                             layout="constrained")
+    fig = new_figure(figsize=(width, 3.8), layout="constrained")
+    axes = fig.subplots(1, len(views), squeeze=False)
     values = np.asarray(rings, dtype=np.float64)
     for ax, view in zip(axes[0], views, strict=True):
         basis, used_up = view_frame(vertices, view, up)
         render_mesh(ax, vertices, faces, values, basis=basis, cmap=cmap, norm=norm,
                     max_faces=max_faces)
         ax.set_title(f"{view} view (up {used_up})", fontsize=9)
-    _colorbar(fig, list(axes[0]), norm, cmap, "learned ring size r (1 soft ... 6+ rigid)")
+    colorbar(fig, list(axes[0]), norm, cmap, "learned ring size r (1 soft ... 6+ rigid)")
     if title:
         fig.suptitle(title, fontsize=10)
     return fig
@@ -638,16 +375,15 @@ def groups_figure(
     >>> len(fig.axes)
     1
     """
-    from matplotlib.patches import Patch
-
-    palette = plt.get_cmap("tab10").colors
+    palette = colormap("tab10").colors
     labels = np.zeros(len(vertices))
     for k, (_, idx) in enumerate(groups):
         labels[np.asarray(idx, dtype=np.int64)] = k + 1
-    colours = [_REST_COLOR] + [palette[k % 10] for k in range(len(groups))]
+    colours = [REST_COLOR] + [palette[k % 10] for k in range(len(groups))]
     cmap = ListedColormap(colours)
     norm = BoundaryNorm(np.arange(len(colours) + 1) - 0.5, len(colours))
-    fig, ax = plt.subplots(figsize=(6.0, 4.6), dpi=110, layout="constrained")
+    fig = new_figure(figsize=(6.0, 4.6), dpi=110, layout="constrained")
+    ax = fig.subplots()
     basis, used_up = view_frame(vertices, view, up)
     render_mesh(ax, vertices, faces, labels, basis=basis, cmap=cmap, norm=norm,
                 max_faces=max_faces, reduce="max")
@@ -662,6 +398,9 @@ def groups_figure(
 def save_figure(fig: Figure, path: str | os.PathLike, dpi: int | None = None) -> None:
     """Save ``fig`` atomically (format from the extension: png, pdf, svg ...) and close it.
 
+    The figures of this module are not pyplot's, so there is nothing to close; a figure the
+    caller made with pyplot is closed there, so that a loop of figures does not pile up.
+
     Examples
     --------
     >>> import tempfile, pathlib
@@ -670,16 +409,20 @@ def save_figure(fig: Figure, path: str | os.PathLike, dpi: int | None = None) ->
     >>> p.read_bytes()[:4]
     b'\\x89PNG'
     """
-    from arapkit.errors import InputError
-    from arapkit.io.fileio import atomic_open, check_figure_format
-
     try:
         fmt = check_figure_format(path)
     except InputError:
-        plt.close(fig)
+        _release(fig)
         raise
     try:
         with atomic_open(path, "wb") as f:
             fig.savefig(f, format=fmt, dpi=dpi)
     finally:
-        plt.close(fig)
+        _release(fig)
+
+
+def _release(fig: Figure) -> None:
+    # never import pyplot here: without it loaded, no figure can be registered with it
+    pyplot = sys.modules.get("matplotlib.pyplot")
+    if pyplot is not None:
+        pyplot.close(fig)

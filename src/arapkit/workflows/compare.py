@@ -201,11 +201,10 @@ def comparison_figure(mesh: Mesh, runs: list[MethodRun], handles, targets=None,
     stand out; handles are dots (dark: fixed,
     red: moved), their faces painted on the rest panel.
     """
-    import matplotlib.pyplot as plt
     from matplotlib.colors import BoundaryNorm, ListedColormap, Normalize
 
     from ..mesh.quality import dihedral_angles
-    from ..plots import figures as plots
+    from ..plots import render as plots
 
     h = np.asarray(handles, dtype=np.int64)
     fixed = np.zeros(len(h), bool) if fixed_mask is None else np.asarray(fixed_mask, bool)
@@ -215,12 +214,13 @@ def comparison_figure(mesh: Mesh, runs: list[MethodRun], handles, targets=None,
     n = len(shapes)
     ncols = ncols or min(n, 3)
     nrows = (n + ncols - 1) // ncols
-    fig = plt.figure(figsize=(3.6 * ncols, 3.4 * nrows + 0.6), dpi=110, layout="constrained")
+    fig = plots.new_figure(figsize=(3.6 * ncols, 3.4 * nrows + 0.6), dpi=110,
+                           layout="constrained")
     axes = np.atleast_1d(fig.subplots(nrows, ncols)).ravel()
     labels = np.zeros(len(V))
     labels[h[fixed]] = 1.0
     labels[h[~fixed]] = 2.0
-    hcmap = ListedColormap([plots._REST_COLOR, plots._FIXED_COLOR, plots._MOVED_COLOR])
+    hcmap = ListedColormap([plots.REST_COLOR, plots.FIXED_COLOR, plots.MOVED_COLOR])
     hnorm = BoundaryNorm([-0.5, 0.5, 1.5, 2.5], 3)
     plots.render_mesh(axes[0], V, F, labels, basis=basis, cmap=hcmap, norm=hnorm, reduce="max")
     axes[0].set_title("rest shape and handles", fontsize=9)
@@ -236,18 +236,18 @@ def comparison_figure(mesh: Mesh, runs: list[MethodRun], handles, targets=None,
         np.maximum.at(per_vertex, E[:, 1], change)
         plots.render_mesh(ax, P, F, per_vertex, basis=basis, cmap=ENERGY_CMAP, norm=dnorm)
         # handles as dots (subsampled for large sets) on every panel
-        plots._mark(ax, P[h[fixed]], basis, plots._FIXED_COLOR, "fixed")
-        plots._mark(ax, P[h[~fixed]], basis, plots._MOVED_COLOR, "moved")
+        plots.mark(ax, P[h[fixed]], basis, plots.FIXED_COLOR, "fixed")
+        plots.mark(ax, P[h[~fixed]], basis, plots.MOVED_COLOR, "moved")
         vol = "" if np.isnan(run.volume_change) else f", vol {100 * run.volume_change:+.1f}%"
         ax.set_title(f"{run.label}: {run.result.iterations} it., {run.seconds:.2f} s\n"
                      f"folded {100 * run.folded:.2f}%{vol}", fontsize=8)
     # one camera: the same view basis and the same frame in every panel
     xy = np.concatenate(shapes) @ basis[:2].T
     for ax in axes[:n]:
-        plots._frame(ax, xy)
+        plots.frame(ax, xy)
     for ax in axes[n:]:
         ax.set_axis_off()
-    plots._colorbar(fig, list(axes[1:n]), dnorm, ENERGY_CMAP,
+    plots.colorbar(fig, list(axes[1:n]), dnorm, ENERGY_CMAP,
                     "dihedral-angle change (degrees, clipped at 60)")
     if title:
         fig.suptitle(title, fontsize=10)

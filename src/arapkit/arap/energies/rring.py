@@ -41,5 +41,5 @@ def rring_energy(graph: EdgeGraph, w: np.ndarray, rings) -> NeighbourhoodEnergy:
 
 
 register_energy(EnergyInfo(
-    "rring", lambda graph, w, weights_kind, rings: rring_energy(graph, w, rings),
+    "rring", lambda graph, w, weights_kind, rings, perm: rring_energy(graph, w, rings),
     descent=True, rigidity_map=True))

@@ -7,7 +7,9 @@ contributes its three edges to the neighbourhoods of its three corners,
     E = sum_t sum_{k in t} sum_{e in t} c_te |(p'_i - p'_j) - R_k (p_i - p_j)|^2,
 
 with ``c_te = cot(angle of t opposite e) / 2`` for ``weights="cotan"`` (libigl's
-``cotmatrix_entries``; an interior edge's two halves add up to its cotangent weight).
+``cotmatrix_entries`` and CGAL's ``SPOKES_AND_RIMS``, which does not clamp; an interior
+edge's two halves add up to its cotangent weight), ``max(cot, 0) / 2`` for
+``weights="cotan-clamped-each"``.
 For any other weighting the edge weight ``w_e`` is split evenly between the edge's
 triangles, so ``uniform`` gives ``c_te = 1/2`` on an interior edge.
 
@@ -43,8 +45,10 @@ def face_edge_weights(graph: EdgeGraph, w: np.ndarray, weights_kind: str | None)
     [[0.5, 0.0, 0.5]]
     """
     F, FE = graph.faces, graph.face_edges
-    if weights_kind == "cotan":
+    if weights_kind in ("cotan", "cotan-clamped-each"):
         cots = _corner_cotangents(graph.vertices, F)
+        if weights_kind == "cotan-clamped-each":
+            cots = np.maximum(cots, 0.0)
         # corner c faces edge (c+1, c+2): face edge c = (c, c+1) faces corner c+2
         return 0.5 * np.roll(cots, 1, axis=1)
     faces_per_edge = np.bincount(FE.ravel(), minlength=len(graph.edges))
@@ -65,5 +69,5 @@ def spokes_and_rims_energy(graph: EdgeGraph, w: np.ndarray,
 
 register_energy(EnergyInfo(
     "spokes-and-rims",
-    lambda graph, w, weights_kind, rings: spokes_and_rims_energy(graph, w, weights_kind),
+    lambda graph, w, weights_kind, rings, perm: spokes_and_rims_energy(graph, w, weights_kind),
     descent=True, needs_faces=True))

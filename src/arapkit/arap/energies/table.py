@@ -36,8 +36,10 @@ class EnergyInfo:
     Attributes
     ----------
     name : str
-    build : callable(graph, w, weights_kind, rings, **options) -> NeighbourhoodEnergy
-        ``rings`` is r per vertex in the graph's numbering (None without a rigidity map).
+    build : callable(graph, w, weights_kind, rings, perm, **options) -> NeighbourhoodEnergy
+        ``rings`` is r per vertex in the graph's numbering (None without a rigidity map);
+        ``perm`` (internal -> caller, or None) maps per-vertex options given in the caller's
+        numbering.
     descent : bool
         Each local and global step minimises the energy exactly over its block, so the
         energy never rises (and Anderson acceleration's energy safeguard applies).
@@ -106,4 +108,4 @@ def make_energy(name: str, graph: EdgeGraph, w: np.ndarray, weights_kind: str | 
         raise InputError(f"energy '{name}' has no rigidity map (rings must be 1)")
     if info.needs_faces and graph.faces is None:
         raise InputError(f"{graph.name}: energy '{name}' needs a triangle mesh")
-    return info.build(graph, w, weights_kind, r, **options)
+    return info.build(graph, w, weights_kind, r, perm, **options)
