@@ -161,8 +161,8 @@ def _check_layer_energy(energy: str) -> None:
     """Refuse, in one line, a method the layer does not offer (the registry's "torch" door)."""
     from arapkit.methods.registry import method, method_names
 
-    known = method_names("library")
-    if energy not in known:
+    if energy not in method_names():
+        known = method_names("library")
         raise InputError(f"unknown energy '{energy}' (use one of {', '.join(known)})")
     info = method(energy)
     if "torch" not in info.interfaces:
