@@ -262,7 +262,7 @@ def scale_child(name: str, times: int, r: int, iters: int) -> None:
     print(json.dumps(dict(mesh=m.name, n=m.n_vertices, r=r, mesh_s=t_mesh, pre_s=t_pre,
                           iter_ms=1e3 * t_it, global_ms=res.timings["global_ms_per_iter"],
                           local_ms=res.timings["local_ms_per_iter"], rss_gib=rss,
-                          nnz=int(len(d._nb.disk_idx)))))
+                          nnz=int(len(d.problem.energy.nbh.disk_idx)))))
 
 
 def scale(name: str, times: int, iters: int) -> list[list]:

@@ -1,12 +1,11 @@
 """Every method through every interface that offers it: the method x interface matrix.
 
-The matrix is generated from the library's own tables
-(:data:`arapkit.arap.energies.base.CAPABILITIES`,
-:data:`arapkit.arap.energies.base.INTERFACES`,
-:data:`arapkit.arap.energies.base.VOLUMETRIC_INTERFACES`, the editor's selector
-:func:`arapkit.editor.settings.solver_choices`), so a newly registered method joins it and an
-interface that claims a method but cannot run it fails here. A cell either runs (exit
-0, finite, deformed, handles met: to round-off for hard constraints, within the method's
+The matrix is generated from the method registry (:mod:`arapkit.methods.registry`: the
+methods, :data:`~arapkit.methods.registry.INTERFACES`,
+:data:`~arapkit.methods.registry.VOLUMETRIC_INTERFACES`) and the editor's selector
+(:func:`arapkit.editor.settings.solver_choices`), so a newly registered method joins it and
+an interface that claims a method but cannot run it fails here. A cell either runs (exit 0,
+finite, deformed, handles met: to round-off for hard constraints, within the method's
 ``handle_tol`` for soft ones) or is refused with its one-line message (exit 2 on the
 command line).
 """
@@ -22,9 +21,14 @@ import numpy as np
 import pytest
 
 from arapkit import Deformer
-from arapkit.arap.energies.base import CAPABILITIES, ENERGIES, INTERFACES, VOLUMETRIC_INTERFACES
 from arapkit.errors import InputError
 from arapkit.io import load_handles, load_mesh, save_rings
+from arapkit.methods.registry import (
+    INTERFACES,
+    VOLUMETRIC_INTERFACES,
+    method,
+    method_names,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 MESH = ROOT / "examples" / "cactus.off"
@@ -33,6 +37,9 @@ HANDLES = ROOT / "examples" / "cactus.json"
 HARD_TOL = 1e-9
 #: free vertices must move at least this much (relative to the diagonal): the arms swing
 MIN_MOTION = 0.02
+#: what a door that can name a method it does not offer says
+NOT_OFFERED = {"library": "unknown energy", "cli": "unknown energy",
+               "batch": "is not available in this build", "torch": "is not available in ARAPLayer"}
 
 
 @dataclass(frozen=True)
@@ -53,11 +60,11 @@ class Variant:
 
     def refusal(self, interface: str) -> str | None:
         """The fragment of the one-line refusal this cell must give; None if it runs."""
-        can = CAPABILITIES[self.energy]
-        if interface not in can.interfaces:
-            return "is not available in ARAPLayer"
+        can = method(self.energy)
         if self.volumetric and interface not in VOLUMETRIC_INTERFACES:
             return "unknown key 'volumetric'"
+        if interface not in can.interfaces:
+            return NOT_OFFERED[interface]
         if self.volumetric and not can.volumetric:
             return "volumetric=True runs r-ring ARAP"
         if self.rings != "1" and not can.rigidity_map:
@@ -72,8 +79,8 @@ def _variants() -> list[Variant]:
     runs it), so that a refusal has one reason.
     """
     out = []
-    for e in ENERGIES:
-        vol_r = "mixed" if CAPABILITIES[e].rigidity_map else "1"
+    for e in method_names():
+        vol_r = "mixed" if method(e).rigidity_map else "1"
         out += [Variant(e), Variant(e, "3"), Variant(e, "mixed"),
                 Variant(e, vol_r, volumetric=True), Variant(e, init="laplacian")]
     return out
@@ -82,7 +89,7 @@ def _variants() -> list[Variant]:
 #: which interfaces can even express a variant (the editor has no "--init"; compare and the
 #: editor take no method name for a method they do not list, the layer has no volume)
 def _expressible(v: Variant, interface: str) -> bool:
-    can = CAPABILITIES[v.energy]
+    can = method(v.energy)
     if interface == "compare":  # runs its fixed set: nothing to ask, nothing to refuse
         return interface in can.interfaces and v.refusal(interface) is None \
             and v.init == "identity"
@@ -137,7 +144,7 @@ def _check_deformed(v: Variant, V: np.ndarray) -> None:
     free = np.setdiff1d(np.arange(mesh.n_vertices), hs.indices)
     assert np.linalg.norm(V[free] - mesh.vertices[free], axis=1).max() > MIN_MOTION * diag
     err = np.linalg.norm(V[hs.indices] - hs.targets, axis=1).max()
-    assert err <= max(CAPABILITIES[v.energy].handle_tol, HARD_TOL) * diag
+    assert err <= max(method(v.energy).handle_tol, HARD_TOL) * diag
 
 
 # ---------------------------------------------------------------------------- interfaces
@@ -263,7 +270,7 @@ def _torch(v: Variant, folder: Path, capsys) -> np.ndarray:
     return layer(torch.tensor(hs.targets)).detach().numpy()
 
 
-DRIVERS = {"library": lambda v, folder, capsys: _library(v, folder), "deform": _deform,
+DRIVERS = {"library": lambda v, folder, capsys: _library(v, folder), "cli": _deform,
            "compare": _compare, "batch": _batch, "editor": _editor, "torch": _torch}
 
 
@@ -333,7 +340,7 @@ def test_every_editor_panel_method_solves(choice):
         w.stop()
     last = updates[-1]
     assert last.final and last.error is None
-    energy = method if method in ENERGIES else "rring"  # the others have hard constraints
+    energy = method if method in method_names() else "rring"  # the others: hard constraints
     _check_deformed(Variant(energy), last.vertices)
 
 

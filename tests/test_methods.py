@@ -15,6 +15,7 @@ from conftest import data_path
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
 from arapkit.arap.problem import ARAPProblem
+from arapkit.arap.solve import arap_solve
 from arapkit.mesh.shapes import bar, bar_bend
 from arapkit.mesh.weights import corner_cotangents, edge_weights
 
@@ -276,7 +277,7 @@ def test_problem_from_graph_equals_mesh_solve():
     w = edge_weights(m)
     ref = Deformer(m, h, rings=2).solve(t, max_iter=15, tol=0)
     p = ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=2, name="bar graph")
-    res = p.solve(t, max_iter=15, tol=0)
+    res = arap_solve(p, t, max_iter=15, tol=0)
     assert np.abs(res.vertices - ref.vertices).max() < 1e-12 * m.bounding_box_diagonal
     assert np.allclose(res.history, ref.history, rtol=1e-12, atol=0)
 
@@ -286,11 +287,11 @@ def test_problem_with_rings_equals_a_fresh_build():
     h, t = bar_bend(m, 90)
     w = edge_weights(m)
     rings = np.where(m.vertices[:, 0] > 3.5, 1, 4)
-    fresh = ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=rings).solve(
-        t, max_iter=10, tol=0)
+    fresh = arap_solve(ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=rings), t,
+                       max_iter=10, tol=0)
     p = ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=2)
-    p.solve(t, max_iter=2, tol=0)
-    res = p.with_rings(rings).solve(t, max_iter=10, tol=0)
+    arap_solve(p, t, max_iter=2, tol=0)
+    res = arap_solve(p.with_rings(rings), t, max_iter=10, tol=0)
     assert np.abs(res.vertices - fresh.vertices).max() < 1e-12 * m.bounding_box_diagonal
     with pytest.raises(InputError, match="vertex 0 has r = 0"):
         p.with_rings(np.zeros(m.n_vertices, int))
@@ -304,7 +305,7 @@ def test_problem_from_graph_tet_rigid():
     Q = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]])
     moved = V @ Q.T + [0.5, -2.0, 1.0]
     p = ARAPProblem.from_graph(V, E, np.ones(len(E)), [0, 1, 2], rings=2)
-    res = p.solve(moved[[0, 1, 2]], tol=1e-14, max_iter=500)
+    res = arap_solve(p, moved[[0, 1, 2]], tol=1e-14, max_iter=500)
     assert np.abs(res.vertices - moved).max() < 1e-6
     assert np.abs(res.vertices - V).max() > 1.0  # it moved
 
@@ -519,3 +520,18 @@ def test_embedded_bad_init_is_one_line_error():
         with pytest.raises(InputError, match=r"^init: expected finite positions") as e:
             d.solve(m.vertices[[0, 1]], init=bad)
         assert "\n" not in str(e.value)
+
+
+def test_registry_capabilities_of_local_global_methods_are_their_energies():
+    """Descent, acceleration and the rigidity map of a local/global method are facts of its
+    energy: the registry takes them from the energy's registration."""
+    from arapkit.arap.energies import energy_info, energy_names
+    from arapkit.methods.registry import methods
+
+    lg = [m for m in methods() if m.local_global]
+    assert {m.name for m in lg} == set(energy_names())
+    for m in lg:
+        en = energy_info(m.name)
+        assert m.descent == en.descent and m.accelerate == en.descent
+        assert m.rigidity_map == en.rigidity_map
+    assert not energy_info("sr-arap").descent  # the Jacobi coupling can raise the energy

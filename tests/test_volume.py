@@ -373,9 +373,9 @@ def test_cli_volumetric_writes_the_surface_and_the_volume(tmp_path, capsys):
 
 def test_cli_volumetric_without_mesher_says_how_to_install(tmp_path, capsys, monkeypatch):
     from arapkit.cli import main
-    from arapkit.methods import volumetric as volume
+    from arapkit.methods.volumetric import mesher
 
-    monkeypatch.setattr(volume, "_ftetwild", lambda: None)
+    monkeypatch.setattr(mesher, "find_mesher", lambda: None)
     mesh, handles = _bar_files(tmp_path)
     rc = main(["deform", str(mesh), "--handles", str(handles), "--volumetric",
                "-o", str(tmp_path / "out.off")])
@@ -398,11 +398,11 @@ def test_cli_volumetric_refuses_an_open_mesh(tmp_path, capsys, data_dir):
 
 @needs_mesher
 def test_a_failing_mesher_is_a_clean_error(tmp_path, monkeypatch):
-    from arapkit.methods import volumetric as volume
+    from arapkit.methods.volumetric import mesher
 
     bogus = tmp_path / "PyfTetWildWrapper.so"
     bogus.write_bytes(b"not a library")
-    monkeypatch.setattr(volume, "_ftetwild", lambda: str(bogus))
+    monkeypatch.setattr(mesher, "find_mesher", lambda: str(bogus))
     with pytest.raises(InputError, match=r"bar: the tetrahedral mesher \(fTetWild\) failed"):
         tetrahedralise(bar(5.0, 1.0, 1.0, (10, 2, 2)))
 

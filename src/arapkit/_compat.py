@@ -36,7 +36,7 @@ MOVED = {
     "arapkit.compare": "arapkit.workflows.compare",
     "arapkit.constraints": "arapkit.arap.constraints",
     "arapkit.embedded": "arapkit.methods.embedded",
-    "arapkit.energy": "arapkit.arap.energies.base",
+    "arapkit.energy": "arapkit.arap.energies",
     "arapkit.fileio": "arapkit.io",
     "arapkit.handles": "arapkit.io",
     "arapkit.jobs": "arapkit.workflows.jobs",

@@ -33,6 +33,7 @@ from arapkit.arap.problem import ARAPProblem
 from arapkit.errors import InputError
 from arapkit.mesh.model import bounding_box_diagonal
 from arapkit.mesh.weights import DEFAULT_WEIGHTS
+from arapkit.validate import iteration_cap, tolerance
 
 __all__ = ["ARAPLayer", "arap_energy"]
 
@@ -156,24 +157,18 @@ def _pcg(apply_H, precond, g: _torch.Tensor, tol: float, max_iter: int):
     return mu, it
 
 
-#: why a method of :data:`arapkit.arap.energies.base.ENERGIES` is not offered by the layer
-_NOT_IN_LAYER = {
-    "sr-arap": "its rotation coupling has no per-step fixed point",
-    "embedded": "it is not a local/global energy",
-}
-
-
 def _check_layer_energy(energy: str) -> None:
-    """Refuse, in one line, a method the layer does not offer (see ``CAPABILITIES``)."""
-    from arapkit.arap.energies.base import ENERGIES, offered_by
+    """Refuse, in one line, a method the layer does not offer (the registry's "torch" door)."""
+    from arapkit.methods.registry import method, method_names
 
-    if energy not in ENERGIES:
-        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(ENERGIES)})")
-    offered = offered_by("torch")
-    if energy not in offered:
-        why = _NOT_IN_LAYER.get(energy, "it is not offered by the layer")
+    if energy not in method_names():
+        known = method_names("library")
+        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(known)})")
+    info = method(energy)
+    if "torch" not in info.interfaces:
+        why = info.why_not.get("torch", "it is not offered by the layer")
         raise InputError(f"energy '{energy}' is not available in ARAPLayer ({why}); use "
-                         f"{' or '.join(repr(e) for e in offered)}")
+                         f"{' or '.join(repr(e) for e in method_names('torch'))}")
 
 
 class ARAPLayer(_torch.nn.Module):
@@ -236,12 +231,10 @@ class ARAPLayer(_torch.nn.Module):
         problem = ARAPProblem.from_mesh(mesh, handles, energy, weights, rings=rings)
         self.problem = problem
         self.system = TorchSystem(problem, device, dtype).bind(problem)
-        self.tol = float(tol)
-        self.max_iter = int(max_iter)
+        self.tol = tolerance(tol)
+        self.max_iter = iteration_cap(max_iter)
         V = problem.vertices
         self._step_tol = None if xtol is None else float(xtol) * bounding_box_diagonal(V)
-        if self.max_iter < 1:
-            raise InputError(f"max_iter must be >= 1, got {max_iter}")
         self.adjoint_tol = (1e-10 if dtype == _torch.float64 else 1e-5) \
             if adjoint_tol is None else float(adjoint_tol)
         self.adjoint_max_iter = int(adjoint_max_iter)

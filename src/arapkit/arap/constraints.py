@@ -14,7 +14,7 @@ vertices held at given positions. This module holds what they share:
 * :class:`CholeskyFactor`: CHOLMOD (via cholespy) with its C-level chatter silenced.
 
 Anything with ``name``, ``n_vertices``, ``n_components`` and ``component_labels`` (a
-:class:`~arapkit.mesh.model.Mesh` or an :class:`~arapkit.arap.problem.EdgeGraph`) can be
+:class:`~arapkit.mesh.model.Mesh` or an :class:`~arapkit.arap.graph.EdgeGraph`) can be
 constrained.
 """
 
@@ -34,7 +34,7 @@ from ..validate import handle_indices, target_positions
 
 if TYPE_CHECKING:
     from ..mesh.model import Mesh
-    from .problem import EdgeGraph
+    from .graph import EdgeGraph
 
 __all__ = [
     "CholeskyFactor",
@@ -42,6 +42,7 @@ __all__ = [
     "anchor_components",
     "check_handles",
     "check_targets",
+    "quiet_c_output",
 ]
 
 
@@ -182,11 +183,16 @@ def _flush_c_stdio() -> None:
 
 
 @contextmanager
-def _quiet_c_output():
+def quiet_c_output():
     """Silence C-level stdout and stderr: CHOLMOD prints a warning before cholespy raises.
 
     stdout must carry results only (the command line pipes it), so the warning is flushed
     into /dev/null before the streams are restored.
+
+    Examples
+    --------
+    >>> with quiet_c_output():
+    ...     pass  # C code called here prints nothing
     """
     sys.stdout.flush()
     sys.stderr.flush()
@@ -220,17 +226,13 @@ class CholeskyFactor:
     [0.090909, 0.636364]
     """
 
-    #: factorisations done by all instances (lets tests prove that new targets never refactorise)
-    count = 0
-
     def __init__(self, A: sp.spmatrix, what: str, remedy: str | Advice = "") -> None:
         from cholespy import CholeskySolverD, MatrixType
 
         A = sp.coo_matrix(A)
         self.n = A.shape[0]
-        CholeskyFactor.count += 1
         try:
-            with _quiet_c_output():
+            with quiet_c_output():
                 self._solver = CholeskySolverD(
                     self.n,
                     A.row.astype(np.int32),

@@ -28,147 +28,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import Advice, InputError
-from ..mesh.model import EdgeTopology
 from ..mesh.weights import SOUND_WEIGHTS
 from .constraints import Elimination, anchor_components, check_handles
+from .energies import make_energy
+from .graph import EdgeGraph, bandwidth_order, check_graph, unit_scale
+from .rings import check_rings
 
 if TYPE_CHECKING:
     from ..mesh.model import Mesh
     from .energies.base import NeighbourhoodEnergy
 
-__all__ = ["ARAPProblem", "EdgeGraph", "bandwidth_order", "unit_scale"]
-
-
-@dataclass(frozen=True, eq=False)
-class EdgeGraph(EdgeTopology):
-    """Rest positions and an undirected edge list (optionally with the triangles they bound).
-
-    Parameters
-    ----------
-    vertices : (n, 3) float64
-    edges : (m, 2) int64
-        Each undirected edge once; edge ids are row numbers.
-    name : str
-        Used in error messages.
-    faces : (f, 3) int64, optional
-        Triangles, for energies defined on triangles (spokes-and-rims, SR-ARAP's area).
-    face_edges : (f, 3) int64, optional
-        Edge id of ``(F[f, c], F[f, c + 1])``; required with ``faces``.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> g = EdgeGraph(np.eye(3), np.array([[0, 1], [1, 2]]))
-    >>> g.n_vertices, g.n_components
-    (3, 1)
-    """
-
-    vertices: np.ndarray
-    edges: np.ndarray
-    name: str = "graph"
-    faces: np.ndarray | None = None
-    face_edges: np.ndarray | None = None
-
-    @classmethod
-    def from_mesh(cls, mesh: Mesh) -> EdgeGraph:
-        """The edge graph of a triangle mesh (its edges keep their ids)."""
-        g = cls(mesh.vertices, mesh.edges, mesh.name, mesh.faces, mesh.face_edges)
-        # the mesh has already labelled its components: do not search again
-        g.__dict__["_components"] = (mesh.n_components, mesh.component_labels)
-        return g
-
-    @property
-    def n_vertices(self) -> int:
-        """Number of vertices."""
-        return len(self.vertices)
-
-    def scaled(self, factor: float) -> EdgeGraph:
-        """The same graph with every position multiplied by ``factor`` (components kept)."""
-        g = EdgeGraph(self.vertices * factor, self.edges, self.name, self.faces,
-                      self.face_edges)
-        g.__dict__["_components"] = (self.n_components, self.component_labels)
-        return g
-
-    def permuted(self, perm: np.ndarray, iperm: np.ndarray) -> EdgeGraph:
-        """The same graph with vertex ``perm[i]`` renamed ``i`` (edge and face ids kept)."""
-        g = EdgeGraph(
-            np.ascontiguousarray(self.vertices[perm]),
-            iperm[self.edges],
-            self.name,
-            None if self.faces is None else iperm[self.faces],
-            self.face_edges,
-        )
-        g.__dict__["_components"] = (self.n_components, self.component_labels[perm])
-        return g
-
-
-def unit_scale(vertices: np.ndarray, name: str) -> float:
-    """The power of two ``s`` with ``extent / s`` in [0.5, 1): the solver works in ``V / s``.
-
-    Dividing by a power of two is exact, so a mesh scaled by ``2**k`` gives bit-identical
-    iterations; any other scale changes nothing beyond round-off. Every tolerance inside
-    the solve (convergence floor, cotangent caps) is then relative to the mesh's own size,
-    and squared lengths neither overflow nor underflow for extents anywhere in the double
-    range.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> unit_scale(np.array([[0.0, 0, 0], [3, 0, 0]]), "m")
-    4.0
-    """
-    V = np.asarray(vertices, dtype=np.float64)
-    if len(V) < 2:
-        return 1.0
-    with np.errstate(over="ignore", invalid="ignore"):
-        extent = float(np.max(V.max(axis=0) - V.min(axis=0)))
-    if not math.isfinite(extent):
-        raise InputError(
-            f"{name}: coordinates span more than double precision can hold "
-            f"(from {V.min():.3g} to {V.max():.3g}); rescale the mesh"
-        )
-    if extent == 0:
-        return 1.0
-    return math.ldexp(1.0, math.frexp(extent)[1])
-
-
-def bandwidth_order(mesh: Mesh | EdgeGraph) -> np.ndarray:
-    """Reverse Cuthill-McKee order of the vertices (new -> old).
-
-    Examples
-    --------
-    >>> from arapkit.mesh.shapes import bar
-    >>> m = bar()
-    >>> sorted(bandwidth_order(m).tolist()) == list(range(m.n_vertices))
-    True
-    """
-    from scipy.sparse.csgraph import reverse_cuthill_mckee
-
-    return reverse_cuthill_mckee(mesh.adjacency.tocsr(), symmetric_mode=True).astype(np.int64)
-
-
-def _check_graph(vertices, edges, weights, name: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    V = np.ascontiguousarray(vertices, dtype=np.float64)
-    if V.ndim != 2 or V.shape[1] != 3:
-        raise InputError(f"{name}: vertices must have shape (n, 3), got {V.shape}")
-    if not np.isfinite(V).all():
-        bad = int(np.flatnonzero(~np.isfinite(V).all(axis=1))[0])
-        raise InputError(f"{name}: vertex {bad} has a non-finite coordinate")
-    E = np.asarray(edges)
-    if E.ndim != 2 or E.shape[1] != 2 or not np.issubdtype(E.dtype, np.integer):
-        raise InputError(f"{name}: edges must be an (m, 2) integer array, got {E.shape} {E.dtype}")
-    E = E.astype(np.int64)
-    bad = np.flatnonzero((E < 0).any(axis=1) | (E >= len(V)).any(axis=1) | (E[:, 0] == E[:, 1]))
-    if len(bad):
-        raise InputError(f"{name}: edge {bad[0]} {E[bad[0]].tolist()} is a loop or out of range "
-                         f"({len(V)} vertices)")
-    key = np.minimum(E[:, 0], E[:, 1]) * len(V) + np.maximum(E[:, 0], E[:, 1])
-    if len(np.unique(key)) != len(key):
-        raise InputError(f"{name}: an edge is listed twice")
-    w = np.ascontiguousarray(weights, dtype=np.float64)
-    if w.shape != (len(E),) or not np.isfinite(w).all():
-        raise InputError(f"{name}: weights must be {len(E)} finite numbers, one per edge")
-    return V, E, w
+__all__ = ["ARAPProblem"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -225,7 +95,8 @@ class ARAPProblem:
         handles : (h,) int
             Constrained vertices.
         energy : str
-            One of :data:`arapkit.arap.energies.base.ENERGIES` for the local/global solver.
+            A registered energy of the local/global solver
+            (:func:`arapkit.arap.energies.energy_names`).
         weights : str, optional
             Edge weighting (default :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`).
         rings : int or (n,) int
@@ -287,16 +158,13 @@ class ARAPProblem:
         (4, 6)
         """
         t0 = time.perf_counter()
-        V, E, w = _check_graph(vertices, edges, weights, name)
+        V, E, w = check_graph(vertices, edges, weights, name)
         return cls._build(EdgeGraph(V, E, name), w, None, handles, "rring", rings,
                           free_components, reorder, {}, t0)
 
     @classmethod
     def _build(cls, graph: EdgeGraph, w, kind, handles, energy, rings, free_components,
                reorder, energy_options, t0) -> ARAPProblem:
-        from .energies.base import make_energy
-        from .rings import check_rings
-
         n = graph.n_vertices
         # the problem lives in units of a power of two near the extent: exact, and every
         # tolerance inside becomes relative to the mesh's own size
@@ -349,9 +217,6 @@ class ARAPProblem:
         >>> int(p.energy.rings.max())
         3
         """
-        from .energies.base import make_energy
-        from .rings import check_rings
-
         if self.energy.name != "rring":
             raise InputError(f"energy '{self.energy.name}' has no rigidity map")
         t0 = time.perf_counter()
@@ -408,54 +273,6 @@ class ARAPProblem:
     def constrained_targets(self, targets: np.ndarray) -> np.ndarray:
         """Positions of :attr:`constrained` for given handle targets (anchors at rest)."""
         return np.concatenate([targets, self.caller_graph.vertices[self.fixed_extra]])
-
-    @cached_property
-    def backend(self):
-        """The CPU backend for this problem (kernels' scratch buffers; built on first use)."""
-        from .backends.cpu import CPUBackend
-
-        return CPUBackend(self).bind(self)
-
-    def solve(self, targets, init=None, *, tol: float = 1e-3, max_iter: int = 1000,
-              callback=None, accelerate: bool = False, history: int = 5):
-        """Solve for handle targets with the local/global loop on the CPU backend.
-
-        Parameters
-        ----------
-        targets : (h, 3)
-            Handle positions, in the order of :attr:`handles`.
-        init : (n, 3), optional
-            Start positions (caller numbering); default the rest shape with identity
-            rotations.
-        tol, max_iter, callback, accelerate, history :
-            As for :meth:`arapkit.Deformer.solve`.
-
-        Returns
-        -------
-        arapkit.arap.loop.Result
-
-        Examples
-        --------
-        >>> import numpy as np
-        >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
-        >>> E = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
-        >>> p = ARAPProblem.from_graph(V, E, np.ones(6), [0, 1, 2])
-        >>> res = p.solve(V[:3] + 1.0)  # translate the handles: the tet follows rigidly
-        >>> bool(np.allclose(res.vertices, V + 1.0))
-        True
-        """
-        from .constraints import check_targets
-        from .loop import local_global
-
-        T = check_targets(self.handles, targets)
-        start = None
-        if init is not None:
-            start = np.asarray(init, dtype=np.float64)
-            if start.shape != (self.n_vertices, 3) or not np.isfinite(start).all():
-                raise InputError(f"init: expected finite positions of shape "
-                                 f"({self.n_vertices}, 3)")
-        return local_global(self, self.backend, T, start, tol=tol, max_iter=max_iter,
-                            callback=callback, accelerate=accelerate, history=history)
 
     @cached_property
     def b_rest(self) -> np.ndarray:

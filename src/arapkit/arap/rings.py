@@ -13,8 +13,8 @@ neighbourhood's *disk* (the vertices its edges touch) carries the coefficient ve
 
 with which the local-step covariance is ``S_k = sum_v c_kv p'_v^T`` and the global
 right-hand side is ``b_v = sum_k R_k c_kv``: both are sparse products over the same
-structure, not Python loops. The solver scatters ``b`` from the per-k order; the copy grouped
-by v (``transpose=True``) is for callers that gather instead.
+structure, not Python loops. The solver scatters ``b`` from the per-k order, so no copy
+grouped by v is kept.
 """
 
 from __future__ import annotations
@@ -158,27 +158,6 @@ def _fill(n, rings, adj_ptr, adj_nbr, adj_eid, edges, W, vptr, eptr, n_chunks,
                     disk_coef[sj, a] -= W[e, a]
 
 
-@nb.njit(cache=True)
-def _transpose(n, vptr, disk_idx, disk_coef):
-    """Regroup the (k, v, c_kv) entries by v (counting sort)."""
-    cnt = np.zeros(n + 1, dtype=np.int64)
-    for t in range(len(disk_idx)):
-        cnt[disk_idx[t] + 1] += 1
-    for v in range(n):
-        cnt[v + 1] += cnt[v]
-    pos = cnt[:-1].copy()
-    tk = np.empty(len(disk_idx), dtype=np.int32)
-    tc = np.empty_like(disk_coef)
-    for k in range(n):
-        for t in range(vptr[k], vptr[k + 1]):
-            v = disk_idx[t]
-            p = pos[v]
-            tk[p] = k
-            tc[p, :] = disk_coef[t, :]
-            pos[v] = p + 1
-    return cnt, tk, tc
-
-
 @dataclass
 class Neighbourhoods:
     """CSR storage of N(k, r_k) for every vertex and the coefficients ``c_kv``.
@@ -192,8 +171,6 @@ class Neighbourhoods:
         edges of N(k, r_k) in BFS order; ``edge_layer`` the smallest r containing each.
     disk_ptr, disk_idx, disk_coef :
         vertices touched by N(k, r_k) (k first) and their coefficients ``c_kv`` (3 each).
-    vdisk_ptr, vdisk_k, vdisk_coef :
-        the same entries grouped by vertex v, or None when built with ``transpose=False``.
     edge_count : (E,) int
         d_e, the number of neighbourhoods containing each edge.
     """
@@ -205,9 +182,6 @@ class Neighbourhoods:
     disk_ptr: np.ndarray
     disk_idx: np.ndarray
     disk_coef: np.ndarray
-    vdisk_ptr: np.ndarray | None
-    vdisk_k: np.ndarray | None
-    vdisk_coef: np.ndarray | None
     edge_count: np.ndarray
 
     def edges_of(self, k: int, r: int | None = None) -> np.ndarray:
@@ -236,9 +210,7 @@ def _chunks(n: int) -> int:
     return max(1, min(n, 4 * nb.get_num_threads()))
 
 
-def build_neighbourhoods(
-    mesh: Mesh, weights: np.ndarray, rings, *, transpose: bool = True
-) -> Neighbourhoods:
+def build_neighbourhoods(mesh: Mesh, weights: np.ndarray, rings) -> Neighbourhoods:
     """Breadth-first search of N(k, r_k) for every vertex, compiled and parallel.
 
     Parameters
@@ -248,9 +220,6 @@ def build_neighbourhoods(
         Weight of each edge of ``mesh.edges``.
     rings : int or (n,) int
         Neighbourhood size per vertex (>= 1).
-    transpose : bool
-        Also store the entries grouped by vertex (``vdisk_*``). The solver scatters the
-        right-hand side instead and skips them, which halves the memory.
 
     Examples
     --------
@@ -263,12 +232,11 @@ def build_neighbourhoods(
     """
     n = mesh.n_vertices
     return neighbourhoods_from_arrays(n, mesh.edges, mesh.vertices, weights,
-                                      check_rings(rings, n), transpose=transpose)
+                                      check_rings(rings, n))
 
 
 def neighbourhoods_from_arrays(
-    n: int, edges: np.ndarray, P: np.ndarray, weights: np.ndarray, rings: np.ndarray,
-    *, transpose: bool = True,
+    n: int, edges: np.ndarray, P: np.ndarray, weights: np.ndarray, rings: np.ndarray
 ) -> Neighbourhoods:
     """:func:`build_neighbourhoods` on raw arrays (any vertex numbering, e.g. a reordering).
 
@@ -298,13 +266,8 @@ def neighbourhoods_from_arrays(
     edge_layer = np.empty(eptr[-1], dtype=np.int8)
     _fill(n, r, ptr, nbr, eid, E, W, vptr, eptr, nch, disk_idx, disk_coef, edge_idx,
           edge_layer)
-    if transpose:
-        tptr, tk, tc = _transpose(n, vptr, disk_idx, disk_coef)
-    else:
-        tptr = tk = tc = None
     count = np.bincount(edge_idx, minlength=len(E))
-    return Neighbourhoods(r, eptr, edge_idx, edge_layer, vptr, disk_idx, disk_coef,
-                          tptr, tk, tc, count)
+    return Neighbourhoods(r, eptr, edge_idx, edge_layer, vptr, disk_idx, disk_coef, count)
 
 
 def rings_summary(rings: np.ndarray) -> dict[str, object]:

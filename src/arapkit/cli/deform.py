@@ -164,11 +164,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def _check_method(args: argparse.Namespace) -> dict[str, Any]:
     """Fail fast on a bad method or option; the keyword arguments for the Deformer."""
-    from arapkit.arap.energies.base import CAPABILITIES
     from arapkit.methods.deformer import check_method
+    from arapkit.methods.registry import method
 
     options = check_method(args.energy, args.sr_alpha, args.nodes)
-    can = CAPABILITIES[args.energy]
+    can = method(args.energy, "cli")
     if not can.rigidity_map and (args.rings_file or args.rings != 1):
         raise InputError(f"--energy {args.energy}: has no rigidity map (drop --rings/--rings-file)")
     if not can.accelerate and args.accelerate:

@@ -349,7 +349,7 @@ def energy_tables(
     """
     t0 = time.perf_counter()
     # one BFS to r_max; the per-vertex regrouping (vdisk_*) serves the solver only
-    nbh = build_neighbourhoods(reference, w, r_max, transpose=False)
+    nbh = build_neighbourhoods(reference, w, r_max)
     t1 = time.perf_counter()
     n, E, M = reference.n_vertices, reference.edges, len(P)
     nr = r_max - r_min + 1

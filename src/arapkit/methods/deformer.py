@@ -31,74 +31,52 @@ Constraints and the Cholesky factor are in :mod:`arapkit.arap.constraints`.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
-from ..arap.backends.cpu import CPUBackend
+from ..arap.backends import check_device, make_backend
 from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
-from ..arap.energies.base import CAPABILITIES, ENERGIES, LOCAL_GLOBAL
+from ..arap.energies import energy_info
+from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
+from ..arap.graph import bandwidth_order, unit_scale
 from ..arap.loop import Result, local_global
-from ..arap.problem import ARAPProblem, bandwidth_order, unit_scale
+from ..arap.problem import ARAPProblem
 from ..arap.rings import Neighbourhoods
 from ..errors import Advice, InputError
 from ..mesh.model import Mesh
 from ..mesh.weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
 from ..validate import integer, iteration_cap, real_array, tolerance
-from .registry import INTERFACES, MethodInfo, register
+from .registry import INTERFACES, MethodInfo, MethodOption, method, method_names, methods, register
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
-           "bandwidth_order", "check_method", "unit_scale"]
+           "bandwidth_order", "check_method", "register_variant", "unit_scale"]
 
 INITS = ("identity", "laplacian")
-DEVICES = ("cpu", "auto", "cuda", "cuda:N", "torch-cpu")
-
-register(MethodInfo("rring", "r-ring ARAP", local_global=True, descent=True, rigidity_map=True,
-                    accelerate=True, volumetric=True))
-register(MethodInfo("spokes-and-rims", "spokes-and-rims ARAP", local_global=True, descent=True,
-                    accelerate=True))
-register(MethodInfo("sr-arap", "SR-ARAP", local_global=True, descent=False,
-                    options=("sr_alpha",), interfaces=frozenset(INTERFACES) - {"torch"}))
 
 
-def _check_device(device: str) -> str:
-    """Resolve ``device`` to "cpu" (numba), "torch-cpu", "cuda" or "cuda:N" (torch backend).
+def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
+    """A method of the local/global loop: what its energy's form fixes comes from the energy.
 
-    ``"auto"`` is CUDA when torch is installed and sees a device, else the numba CPU path.
-    The torch devices need the extra ``arapkit[torch]``; without it (or without CUDA) the
-    error names the remedy.
+    Anderson acceleration keeps an extrapolation only when it lowers the energy, a safeguard
+    that holds for descent methods alone.
     """
-    from importlib.util import find_spec
-
-    dev = str(device).lower()
-    if dev == "cpu":
-        return "cpu"
-    if dev == "auto":
-        if find_spec("torch") is None:
-            return "cpu"
-        import torch
-
-        return "cuda" if torch.cuda.is_available() else "cpu"
-    if dev == "gpu":
-        dev = "cuda"
-    if dev in ("cuda", "torch-cpu") or dev.startswith("cuda:"):
-        if find_spec("torch") is None:
-            raise InputError(f"device='{device}' needs PyTorch: pip install 'arapkit[torch]' "
-                             "(a CUDA build for a GPU), or use device='cpu'")
-        from ..arap.backends.torch_backend import resolve_device
-
-        resolve_device("cpu" if dev == "torch-cpu" else dev)
-        return dev
-    raise InputError(f"unknown device '{device}' (use 'cpu', 'auto', 'cuda', 'cuda:N' or "
-                     "'torch-cpu')")
+    en = energy_info(name)
+    return MethodInfo(name, label, local_global=True, descent=en.descent,
+                      rigidity_map=en.rigidity_map, accelerate=en.descent, **kw)
 
 
-def _make_backend(problem: ARAPProblem, device: str):
-    """The backend for a resolved device: numba kernels on "cpu", torch tensors otherwise."""
-    if device == "cpu":
-        return CPUBackend(problem)
-    from ..arap.backends.torch_backend import TorchBackend
-
-    return TorchBackend(problem, "cpu" if device == "torch-cpu" else device)
+register(_local_global_method("rring", "r-ring ARAP", volumetric=True))
+# compare runs the paper's comparison set, which has no spokes-and-rims
+register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP",
+                              interfaces=frozenset(INTERFACES) - {"compare"}))
+register(_local_global_method(
+    "sr-arap", "SR-ARAP",
+    # sr_roi's vertex ids are checked where the mesh is known (make_energy)
+    options={"sr_alpha": MethodOption("alpha", DEFAULT_ALPHA, check_alpha),
+             "sr_roi": MethodOption("roi", None, lambda roi: roi)},
+    interfaces=frozenset(INTERFACES) - {"torch"},
+    why_not={"torch": "its rotation coupling has no per-step fixed point"}))
 
 
 def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None) -> dict:
@@ -109,24 +87,46 @@ def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None) -> dict:
     >>> check_method("sr-arap", "0.1")
     {'alpha': 0.1}
     """
-    if energy not in ENERGIES:
-        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(ENERGIES)})")
-    if sr_alpha is not None and energy != "sr-arap":
-        raise InputError(f"sr_alpha is an option of energy 'sr-arap', not '{energy}'")
-    if nodes is not None and energy != "embedded":
-        raise InputError(f"nodes is an option of energy 'embedded', not '{energy}'")
-    if sr_roi is not None and energy != "sr-arap":
-        raise InputError(f"sr_roi is an option of energy 'sr-arap', not '{energy}'")
-    if energy == "sr-arap":
-        from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
+    names = method_names("library")
+    if energy not in names:
+        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(names)})")
+    info = method(energy)
+    given = {"sr_alpha": sr_alpha, "nodes": nodes, "sr_roi": sr_roi}
+    for name, value in given.items():
+        if value is not None and name not in info.options:
+            owner = next(m.name for m in methods("library") if name in m.options)
+            raise InputError(f"{name} is an option of energy '{owner}', not '{energy}'")
+    options = {opt.key: opt.check(opt.default if given.get(name) is None else given[name])
+               for name, opt in info.options.items()}
+    # an option without a default is left out unless given
+    return {key: value for key, value in options.items() if value is not None}
 
-        alpha = check_alpha(DEFAULT_ALPHA if sr_alpha is None else sr_alpha)
-        return {"alpha": alpha} if sr_roi is None else {"alpha": alpha, "roi": sr_roi}
-    if energy == "embedded":
-        from .embedded import DEFAULT_NODES, check_nodes
 
-        return {"nodes": check_nodes(DEFAULT_NODES if nodes is None else nodes)}
-    return {}
+def _refuse_acceleration(info: MethodInfo, remedy: str = "") -> None:
+    if not info.accelerate:
+        raise InputError(f"accelerate: Anderson acceleration is for the local/global "
+                         f"descent methods; energy '{info.name}' is not one{remedy}")
+
+
+#: the classes ``Deformer(..., <name>=True)`` returns instead (``volumetric``), registered by
+#: their own modules (:mod:`arapkit.methods.volumetric` registers itself)
+_VARIANTS: dict[str, type] = {}
+
+
+def register_variant(flag: str, cls: type) -> type:
+    """Make ``Deformer(..., <flag>=True)`` return ``cls(mesh, handles, rings, **options)``.
+
+    ``cls`` takes the Deformer's keyword options, less the method's (``energy``,
+    ``sr_alpha``, ``sr_roi``, ``nodes``), which :class:`Deformer` checks first.
+
+    Examples
+    --------
+    >>> from arapkit.methods.volumetric import VolumetricDeformer
+    >>> register_variant("volumetric", VolumetricDeformer) is VolumetricDeformer
+    True
+    """
+    _VARIANTS[flag] = cls
+    return cls
 
 
 def _rows(ptr: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -229,18 +229,15 @@ class Deformer:
             if density is not None:
                 raise InputError("density is an option of volumetric=True")
             return super().__new__(cls)
-        from .volumetric import DEFAULT_DENSITY, VolumetricDeformer
-
-        energy = options.get("energy", "rring")
-        check_method(energy, options.get("sr_alpha"), options.get("nodes"))
-        if not CAPABILITIES[energy].volumetric:
+        energy = options.pop("energy", "rring")
+        check_method(energy, options.pop("sr_alpha", None), options.pop("nodes", None),
+                     options.pop("sr_roi", None))
+        if not method(energy).volumetric:
             raise InputError(f"volumetric=True runs r-ring ARAP; energy '{energy}' is for "
                              "surfaces")
-        for key in ("energy", "sr_alpha", "sr_roi", "nodes"):
-            options.pop(key, None)
-        return VolumetricDeformer(mesh, handles, rings,
-                                  density=DEFAULT_DENSITY if density is None else density,
-                                  **options)
+        if density is not None:
+            options["density"] = density
+        return _VARIANTS["volumetric"](mesh, handles, rings, **options)
 
     def __init__(
         self,
@@ -264,8 +261,9 @@ class Deformer:
         reorder: bool = True,
         device: str = "cpu",
     ) -> None:
-        self.device = _check_device(device)
+        self.device = check_device(device)
         options = check_method(energy, sr_alpha, nodes, sr_roi)
+        info = method(energy)
         self.mesh = mesh
         self.energy = energy
         self.weights_kind = weights
@@ -275,15 +273,13 @@ class Deformer:
             raise InputError(f"unknown init '{init}' (use {' or '.join(INITS)})")
         self.init = init
         self.accelerate = bool(accelerate)
-        if self.accelerate and not CAPABILITIES[energy].accelerate:
-            raise InputError(f"accelerate: Anderson acceleration is for the local/global "
-                             f"descent methods; energy '{energy}' is not one "
-                             "(use accelerate=False)")
+        if self.accelerate:
+            _refuse_acceleration(info, " (use accelerate=False)")
         self.history = integer(history, "history", lo=1, hi=1000)
         self.factorisations = 0
         self._laplacian_editor = None
         self.embedded = None
-        if energy not in LOCAL_GLOBAL:
+        if not info.local_global:
             from .embedded import EmbeddedDeformation
 
             if not np.all(np.asarray(rings) == 1):
@@ -299,7 +295,7 @@ class Deformer:
         self._rings = self.problem.energy.rings[self.problem.iperm]
         if sr_roi is not None:
             _check_outside_roi_is_held(mesh, sr_roi, handles)
-        self.backend = _make_backend(self.problem, self.device)
+        self.backend = make_backend(self.problem, self.device)
         self._weight_notes = self._check_rest_is_minimum()
 
     # -- configuration (lazy refactorisation, as CGAL) -----------------------------
@@ -316,12 +312,12 @@ class Deformer:
     def set_rings(self, rings) -> None:
         """Use a new rigidity map (int or per-vertex); rebuilds neighbourhoods and the factor."""
         p = self.problem
-        if not CAPABILITIES[self.energy].rigidity_map:
+        if not method(self.energy).rigidity_map:
             if not np.all(np.asarray(rings) == 1):
                 raise InputError(f"energy '{self.energy}' has no rigidity map (rings must be 1)")
             return
         self.problem = p.with_rings(rings)
-        self.backend = _make_backend(self.problem, self.device)
+        self.backend = make_backend(self.problem, self.device)
         self._rings = self.problem.energy.rings[self.problem.iperm]
         self._weight_notes = self._check_rest_is_minimum()
 
@@ -403,8 +399,7 @@ class Deformer:
     def neighbourhoods(self) -> Neighbourhoods:
         """The neighbourhoods in use, relabelled to the mesh's vertex numbering.
 
-        No search is repeated: the solver's structure is permuted (without the transposed
-        ``vdisk_*`` copy).
+        No search is repeated: the solver's structure is permuted.
         """
         p = self._local_global("neighbourhoods")
         nbh = p.energy.nbh
@@ -412,26 +407,8 @@ class Deformer:
         dptr, did = _rows(nbh.disk_ptr, p.iperm)
         return Neighbourhoods(
             nbh.rings[p.iperm], eptr, nbh.edge_idx[eid], nbh.edge_layer[eid], dptr,
-            p.perm[nbh.disk_idx[did]].astype(np.int32), nbh.disk_coef[did],
-            None, None, None, nbh.edge_count,
+            p.perm[nbh.disk_idx[did]].astype(np.int32), nbh.disk_coef[did], nbh.edge_count,
         )
-
-    # internal structures, read by the memory-layout tests and benchmarks
-    @property
-    def _nb(self) -> Neighbourhoods:
-        return self.problem.energy.nbh
-
-    @property
-    def _buf(self) -> np.ndarray:
-        return self.backend.buf
-
-    @property
-    def _chunk_ptr(self) -> np.ndarray:
-        return self.backend.chunk_ptr
-
-    @property
-    def _factor(self) -> CholeskyFactor | None:
-        return self.problem.elimination.factor if self.problem.factorised else None
 
     def prepare(self) -> None:
         """Factorise now (otherwise the first :meth:`solve` does it); reused for all targets."""
@@ -439,7 +416,7 @@ class Deformer:
             return
         if self.backend.problem is not self.problem or not self.problem.factorised:
             if self.backend.problem.energy is not self.problem.energy:
-                self.backend = _make_backend(self.problem, self.device)
+                self.backend = make_backend(self.problem, self.device)
             was = self.problem.factorised
             self.backend.bind(self.problem)
             if not was and self.problem.elimination.factor is not None:
@@ -517,9 +494,8 @@ class Deformer:
         tol = self.tol if tol is None else tolerance(tol)
         max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
         accelerate = self.accelerate if accelerate is None else bool(accelerate)
-        if accelerate and not CAPABILITIES[self.energy].accelerate:
-            raise InputError(f"accelerate: Anderson acceleration is for the local/global "
-                             f"descent methods; energy '{self.energy}' is not one")
+        if accelerate:
+            _refuse_acceleration(method(self.energy))
         if self.embedded is not None:
             # a start shape becomes node maps fitted to it (EmbeddedDeformation.fit_node_maps)
             return self.embedded.solve(T, init=self._initial_positions(T, init), tol=tol,

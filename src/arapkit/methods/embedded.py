@@ -37,18 +37,14 @@ from ..arap.constraints import CholeskyFactor, check_handles, check_targets
 from ..arap.loop import Result
 from ..errors import InputError
 from ..mesh.model import Mesh
-from .registry import MethodInfo, register
+from ..validate import iteration_cap, tolerance
+from .registry import MethodInfo, MethodOption, register
 
 __all__ = ["DEFAULT_NODES", "EmbeddedDeformation", "check_nodes", "sample_nodes"]
 
 #: default graph size (clamped to the number of vertices)
 DEFAULT_NODES = 200
 
-# Gauss-Newton with a step control that refuses a rising step: a descent method; handles are
-# soft (a weighted term), met to the tolerance the docs state
-register(MethodInfo("embedded", "embedded deformation", local_global=False, descent=True,
-                    exact_handles=False, options=("nodes",),
-                    interfaces=frozenset({"library", "cli", "compare", "batch", "editor"})))
 #: nearest nodes per vertex (the paper's k = 4)
 K_NEAREST = 4
 #: the paper's weights
@@ -73,6 +69,16 @@ def check_nodes(nodes) -> int:
     if k < 2:
         raise InputError(f"nodes must be at least 2, got {k}")
     return k
+
+
+# Gauss-Newton with a step control that refuses a rising step: a descent method. Handles are
+# soft (weight W_CON): 2 % of the bounding-box diagonal is the bound its tests hold on every
+# mesh (docs/methods.md)
+register(MethodInfo(
+    "embedded", "embedded deformation", local_global=False, descent=True, handle_tol=2e-2,
+    options={"nodes": MethodOption("nodes", DEFAULT_NODES, check_nodes)},
+    interfaces=frozenset({"library", "cli", "compare", "batch", "editor"}),
+    why_not={"torch": "it is not a local/global energy"}))
 
 
 def sample_nodes(V: np.ndarray, count: int, seed_vertex: int = 0) -> np.ndarray:
@@ -142,8 +148,8 @@ class EmbeddedDeformation:
         t0 = time.perf_counter()
         self.mesh = mesh
         self.handles = check_handles(mesh, handles)
-        self.tol = float(tol)
-        self.max_iter = int(max_iter)
+        self.tol = tolerance(tol)
+        self.max_iter = iteration_cap(max_iter)
         V = mesh.vertices
         count = DEFAULT_NODES if nodes is None else check_nodes(nodes)
         self.node_ids = sample_nodes(V, min(count, mesh.n_vertices))
@@ -331,8 +337,8 @@ class EmbeddedDeformation:
         """
         t_start = time.perf_counter()
         T = check_targets(self.handles, targets)
-        tol = self.tol if tol is None else float(tol)
-        max_iter = self.max_iter if max_iter is None else int(max_iter)
+        tol = self.tol if tol is None else tolerance(tol)
+        max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
         m = len(self.nodes)
         X = self._start(init)
         J_lin = self._linear_jacobian()

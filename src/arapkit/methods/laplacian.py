@@ -23,9 +23,11 @@ from .registry import MethodInfo, register
 
 __all__ = ["LaplacianEditor", "laplacian_edit", "differential_operator"]
 
-# one linear solve, no iterations: offered by the library and the editor
+# one linear solve, no iterations: the library offers it as its own class (LaplacianEditor,
+# not through Deformer), the editor as a solver-panel method
 register(MethodInfo("laplacian", "Laplacian editing", local_global=False, descent=True,
-                    interfaces=frozenset({"library", "editor"})))
+                    interfaces=frozenset({"editor"}),
+                    why_not={"torch": "it is not a local/global energy"}))
 
 
 def differential_operator(mesh: Mesh, weights: str = DEFAULT_WEIGHTS) -> sp.csr_matrix:

@@ -16,14 +16,41 @@ False
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from ..errors import InputError
 
-__all__ = ["INTERFACES", "MethodInfo", "method", "method_names", "methods", "register"]
+__all__ = ["INTERFACES", "VOLUMETRIC_INTERFACES", "MethodInfo", "MethodOption", "method",
+           "method_names", "methods", "register"]
 
-#: the doors a method can be offered through
+#: the doors a method can be offered through: :class:`arapkit.Deformer` ("library"),
+#: ``arapkit deform`` ("cli"), ``arapkit compare``, ``arapkit batch``, the editor's solver
+#: and :class:`arapkit.torch.ARAPLayer` ("torch")
 INTERFACES = ("library", "cli", "compare", "batch", "editor", "torch")
+#: the doors that offer volumetric ARAP (``volumetric=True``) to a method that runs on a
+#: volume: batch jobs and the torch layer have no volume
+VOLUMETRIC_INTERFACES = ("library", "cli", "compare", "editor")
+
+
+@dataclass(frozen=True)
+class MethodOption:
+    """A method's own keyword option.
+
+    Attributes
+    ----------
+    key : str
+        The keyword the method's builder takes (``sr_alpha`` is SR-ARAP's ``alpha``).
+    default : object
+        The value used when the option is not given.
+    check : callable(value) -> value
+        Validates a given value (a one-line InputError otherwise).
+    """
+
+    key: str
+    default: Any
+    check: Callable[[Any], Any]
 
 
 @dataclass(frozen=True)
@@ -47,12 +74,17 @@ class MethodInfo:
         Takes Anderson acceleration.
     volumetric : bool
         Runs on a tetrahedralised volume too (``volumetric=True``).
-    exact_handles : bool
-        Handles are met exactly (eliminated); False for soft constraints.
-    options : tuple of str
-        Method-specific keyword options (``sr_alpha``, ``nodes``).
+    handle_tol : float
+        How far a handle may end from its target, relative to the bounding-box diagonal:
+        0 for hard constraints (eliminated, met to round-off), the soft constraints'
+        residual bound otherwise.
+    options : dict of str to MethodOption
+        Method-specific keyword options by their public name (``sr_alpha``, ``nodes``).
     interfaces : frozenset of str
         The doors of :data:`INTERFACES` that offer the method.
+    why_not : dict of str to str
+        For a door of :data:`INTERFACES` that does not offer the method, why (the refusal
+        says so); the default reason otherwise.
     """
 
     name: str
@@ -62,9 +94,15 @@ class MethodInfo:
     rigidity_map: bool = False
     accelerate: bool = False
     volumetric: bool = False
-    exact_handles: bool = True
-    options: tuple[str, ...] = ()
+    handle_tol: float = 0.0
+    options: dict[str, MethodOption] = field(default_factory=dict, hash=False)
     interfaces: frozenset[str] = field(default_factory=lambda: frozenset(INTERFACES))
+    why_not: dict[str, str] = field(default_factory=dict, hash=False, compare=False)
+
+    @property
+    def exact_handles(self) -> bool:
+        """Handles are met exactly (eliminated); False for soft constraints."""
+        return self.handle_tol == 0.0
 
 
 _METHODS: dict[str, MethodInfo] = {}
@@ -74,7 +112,7 @@ _ALIASES = {"arap": "rring"}
 
 def register(info: MethodInfo) -> MethodInfo:
     """Add a method to the table (its module calls this once, at import)."""
-    unknown = set(info.interfaces) - set(INTERFACES)
+    unknown = (set(info.interfaces) | set(info.why_not)) - set(INTERFACES)
     if unknown:
         raise ValueError(f"method {info.name!r}: unknown interfaces {sorted(unknown)}")
     _METHODS[info.name] = info
@@ -82,7 +120,10 @@ def register(info: MethodInfo) -> MethodInfo:
 
 
 def methods(interface: str | None = None) -> tuple[MethodInfo, ...]:
-    """The registered methods, in registration order; only those ``interface`` offers."""
+    """The registered methods, in registration order; only those ``interface`` offers.
+
+    Importing :mod:`arapkit.methods` registers every method.
+    """
     return tuple(m for m in _METHODS.values() if interface is None or interface in m.interfaces)
 
 
@@ -95,6 +136,11 @@ def method(name: str, interface: str | None = None) -> MethodInfo:
     """The method called ``name`` (old aliases accepted); a one-line InputError otherwise.
 
     ``interface`` also checks that the door offers it.
+
+    Examples
+    --------
+    >>> method("arap").name
+    'rring'
     """
     key = _ALIASES.get(str(name), str(name))
     info = _METHODS.get(key)

@@ -65,13 +65,13 @@ def method_list(rings: int = 3, rings_map: np.ndarray | None = None,
     >>> [label for label, _ in method_list(4, volumetric=True)][-1]
     'volumetric ARAP'
     """
-    from ..arap.energies.base import CAPABILITIES, offered_by
+    from ..methods.registry import methods as registered
 
     # every method registered for compare, at r = 1 where it has a rigidity map
     methods: list[tuple[str, dict[str, Any]]] = [
-        (LABELS.get(name, name),
-         {"energy": name, **({"rings": 1} if CAPABILITIES[name].rigidity_map else {})})
-        for name in offered_by("compare")
+        (LABELS.get(m.name, m.name),
+         {"energy": m.name, **({"rings": 1} if m.rigidity_map else {})})
+        for m in registered("compare")
     ]
     if rings != 1:
         methods.append((f"r-ring r={rings}", {"energy": "rring", "rings": rings}))

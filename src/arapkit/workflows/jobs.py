@@ -36,9 +36,9 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
-from ..arap.energies.base import ENERGIES
 from ..errors import Advice, InputError, worded_for
 from ..methods.deformer import Deformer
+from ..methods.registry import method_names
 
 __all__ = ["DEFAULT_ENERGY", "ENERGIES", "JOB_DEFAULTS", "DeformJob", "JobInputs", "PreparedJob",
            "describe_groups", "describe_rings", "error_message", "job_report", "load_job_inputs",
@@ -55,6 +55,9 @@ def _solver_defaults() -> dict[str, Any]:
 
 
 _SOLVER = _solver_defaults()
+
+#: the methods of ``arapkit deform`` and its jobs (those the registry offers to the command line)
+ENERGIES = method_names("cli")
 #: r-ring ARAP, the default method (one of :data:`ENERGIES`, the methods this build can run)
 DEFAULT_ENERGY: str = _SOLVER["energy"]
 

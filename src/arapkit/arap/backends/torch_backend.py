@@ -62,8 +62,10 @@ def _release_factors() -> None:
         system._factor = None
         # the problem's own (CPU) factor is kept alive by the same contexts
         for problem in (system.problem, system._bound):
-            el = problem.__dict__.get("elimination") if problem is not None else None
-            if el is not None and el.factor is not None:
+            if problem is None or not problem.factorised:
+                continue
+            el = problem.elimination
+            if el.factor is not None:
                 el.factor._solver = None
 
 
@@ -290,7 +292,7 @@ class TorchSystem:
             raise ValueError("bind: the problem has another energy; build a new TorchSystem")
         from cholespy import CholeskySolverD, CholeskySolverF, MatrixType
 
-        from ..constraints import _quiet_c_output
+        from ..constraints import quiet_c_output
 
         el = problem.elimination  # validates and factorises on the CPU (errors come from here)
         long = torch.int64
@@ -313,7 +315,7 @@ class TorchSystem:
         self._factor = None
         if self.nf:
             Solver = CholeskySolverF if dt == torch.float32 else CholeskySolverD
-            with _quiet_c_output():  # already known to be positive definite (el above)
+            with quiet_c_output():  # already known to be positive definite (el above)
                 self._factor = Solver(
                     self.nf,
                     torch.as_tensor(rows.astype(np.int32), device=dev),

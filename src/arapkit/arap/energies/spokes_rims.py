@@ -24,9 +24,10 @@ import numpy as np
 
 from ...mesh.weights import corner_cotangents
 from .base import NeighbourhoodEnergy, energy_from_entries
+from .table import EnergyInfo, register_energy
 
 if TYPE_CHECKING:
-    from ..problem import EdgeGraph
+    from ..graph import EdgeGraph
 
 __all__ = ["face_edge_weights", "spokes_and_rims_energy"]
 
@@ -38,7 +39,7 @@ def face_edge_weights(graph: EdgeGraph, w: np.ndarray, weights_kind: str | None)
     --------
     >>> import numpy as np
     >>> from arapkit import Mesh
-    >>> from arapkit.arap.problem import EdgeGraph
+    >>> from arapkit.arap.graph import EdgeGraph
     >>> g = EdgeGraph.from_mesh(Mesh([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]]))
     >>> np.round(face_edge_weights(g, None, "cotan"), 6).tolist()  # edge (1,2) faces 90 deg
     [[0.5, 0.0, 0.5]]
@@ -64,3 +65,9 @@ def spokes_and_rims_energy(graph: EdgeGraph, w: np.ndarray,
     e = np.tile(FE, (1, 3)).ravel()              # ... -> edge id
     c = np.tile(C, (1, 3)).ravel()
     return energy_from_entries("spokes-and-rims", graph, k, e, c)
+
+
+register_energy(EnergyInfo(
+    "spokes-and-rims",
+    lambda graph, w, weights_kind, rings, perm: spokes_and_rims_energy(graph, w, weights_kind),
+    descent=True, needs_faces=True))

@@ -35,10 +35,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ...errors import InputError
-from .base import NeighbourhoodEnergy, rring_energy
+from .base import NeighbourhoodEnergy
+from .rring import rring_energy
+from .table import EnergyInfo, register_energy
 
 if TYPE_CHECKING:
-    from ..problem import EdgeGraph
+    from ..graph import EdgeGraph
 
 __all__ = ["DEFAULT_ALPHA", "check_alpha", "check_roi", "sr_arap_energy", "surface_area"]
 
@@ -120,6 +122,20 @@ def sr_arap_energy(graph: EdgeGraph, w: np.ndarray, alpha: float = DEFAULT_ALPHA
     coupling = (indptr, j, rc_w)
     # |R_k - R_j|^2 = 6 - 2 tr(R_k R_j^T): the kernel's trace carries the second part
     rest = base.rest_term + 6.0 * float(rc_w.sum())
-    return replace(base, name="sr-arap", rest_term=rest, coupling=coupling, descent=False,
+    return replace(base, name="sr-arap", rest_term=rest, coupling=coupling,
                    options={"alpha": alpha} if roi is None else
                    {"alpha": alpha, "roi_vertices": int(roi.sum())})
+
+
+def _build(graph: EdgeGraph, w: np.ndarray, weights_kind, rings, perm: np.ndarray | None,
+           alpha: float = DEFAULT_ALPHA, roi=None) -> NeighbourhoodEnergy:
+    """The table's builder: ``roi`` given as vertex ids in the caller's numbering."""
+    if roi is not None:
+        roi = check_roi(roi, graph.n_vertices)
+        roi = roi if perm is None else roi[perm]
+    return sr_arap_energy(graph, w, alpha, roi)
+
+
+# the Jacobi sweep over the coupling is not a descent step (see the module docstring)
+register_energy(EnergyInfo("sr-arap", _build, descent=False, needs_faces=True,
+                           options=("alpha", "roi")))
