@@ -38,17 +38,8 @@ __all__ = [
 ]
 
 
-def check_rings(rings, n_vertices: int, name: str = "rings") -> np.ndarray:
-    """Validate an int or per-vertex array of ring counts and return it as (n,) int32.
-
-    The rule (integers in ``1..MAX_RINGS``) is :func:`arapkit.validate.ring_sizes`.
-
-    Examples
-    --------
-    >>> check_rings(2, 3).tolist()
-    [2, 2, 2]
-    """
-    return ring_sizes(rings, n_vertices, name)
+#: r per vertex, checked: the one rule of :func:`arapkit.validate.ring_sizes` (int32)
+check_rings = ring_sizes
 
 
 def vertex_adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -126,7 +126,7 @@ def build_state(args: argparse.Namespace) -> Any:
         st = _bar_state()
     ring_size_rule(args.rings, "--rings")
     if not args.session and args.rings != 1:
-        st.rings = st._check_rings(args.rings)
+        st.rings = st.check_rings(args.rings)
     # vertex numbers in files given on the command line are the input's, also when welded
     welded = getattr(st.mesh, "welded_from", None)
     source = welded.source if welded is not None else st.mesh
@@ -136,12 +136,12 @@ def build_state(args: argparse.Namespace) -> Any:
             from arapkit.mesh.welding import weld_values
 
             rings = weld_values(st.mesh, rings)
-        st.rings = st._check_rings(rings)
+        st.rings = st.check_rings(rings)
     if args.handles:
         hs = load_handles(args.handles, source.vertices,
                           welded=None if welded is None else st.mesh)
         st.add_handle_set(hs, record=False)
-    st._undo.clear()  # start-up choices are not undoable edits
+    st.clear_history()  # start-up choices are not undoable edits
     return st
 
 

@@ -93,7 +93,7 @@ class EditorState:
         self.mesh = mesh
         self.mesh_path = None if mesh_path is None else str(mesh_path)
         self.vertices = np.array(mesh.vertices, dtype=np.float64)
-        self.rings = self._check_rings(rings)
+        self.rings = self.check_rings(rings)
         self.handles: list[Handle] = []
         self.selection = np.zeros(0, dtype=np.int64)
         self.settings = SolverSettings()
@@ -106,9 +106,15 @@ class EditorState:
     def n(self) -> int:
         return int(self.mesh.n_vertices)
 
-    def _check_rings(self, rings: int | np.ndarray, source: str = "rings") -> np.ndarray:
-        # the library's one rule (1..MAX_RINGS), as for the command line and rings files
-        return validate.ring_sizes(rings, self.n, source).astype(np.int64)
+    def check_rings(self, rings: int | np.ndarray, source: str = "rings") -> np.ndarray:
+        """r for every vertex of this mesh by the library's one rule
+        (:func:`arapkit.validate.ring_sizes`), as for the command line and rings files."""
+        return validate.ring_sizes(rings, self.n, source)
+
+    def clear_history(self) -> None:
+        """Forget the undo history (start-up choices are not undoable edits)."""
+        self._undo.clear()
+        self._redo.clear()
 
     # ---------------------------------------------------------------- undo / redo
     def _snapshot(self) -> _Snapshot:
@@ -332,13 +338,13 @@ class EditorState:
     # ---------------------------------------------------------------- rigidity
     def set_global_rings(self, r: int) -> None:
         """Give every vertex the same ``r``."""
-        new = self._check_rings(validate.ring_size(r, "global r"))
+        new = self.check_rings(validate.ring_size(r, "global r"))
         self.checkpoint()
         self.rings = new
 
     def load_rings(self, rings: np.ndarray) -> None:
         """Replace the rigidity map (e.g. a learned rings file)."""
-        new = self._check_rings(rings)
+        new = self.check_rings(rings)
         self.checkpoint()
         self.rings = new
 
@@ -425,7 +431,7 @@ class EditorState:
         all_idx = np.concatenate([h.vertices for h in handles]) if handles else np.zeros(0)
         if np.unique(all_idx).size != all_idx.size:
             raise InputError("session: a vertex belongs to two handles")
-        rings = self._check_rings(d["rings"], "session rings") if "rings" in d else self.rings
+        rings = self.check_rings(d["rings"], "session rings") if "rings" in d else self.rings
         settings = SolverSettings.from_dict(d.get("solver", {}))
         if record:
             self.checkpoint()
