@@ -59,6 +59,19 @@ MOVED = {
 }
 
 
+def _registry() -> types.ModuleType:
+    return importlib.import_module("arapkit.methods.registry")
+
+
+#: constants an old module had that the method registry now derives (read on access)
+DERIVED = {
+    "arapkit.energy": {
+        "ENERGIES": lambda: _registry().method_names("cli"),
+        "LOCAL_GLOBAL": lambda: tuple(m.name for m in _registry().methods() if m.local_global),
+    },
+}
+
+
 class _Alias(types.ModuleType):
     """A module that reads and writes through to the module it stands for."""
 
@@ -67,6 +80,9 @@ class _Alias(types.ModuleType):
         object.__setattr__(self, "_target", target)
 
     def __getattr__(self, name: str) -> Any:
+        derived = DERIVED.get(object.__getattribute__(self, "__name__"), {})
+        if name in derived:
+            return derived[name]()
         return getattr(object.__getattribute__(self, "_target"), name)
 
     def __setattr__(self, name: str, value: Any) -> None:

@@ -35,7 +35,7 @@ from typing import Any
 
 import numpy as np
 
-from ..arap.backends import check_device, make_backend
+from ..arap.backends import DEVICES, check_device, make_backend  # noqa: F401 - DEVICES: what device= takes
 from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
 from ..arap.energies import energy_info
 from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
