@@ -22,18 +22,18 @@ import weakref
 
 import torch as _torch
 
-from arapkit.arap.backends.torch_backend import (
+from .arap.backends.torch_backend import (
     TorchSystem,
     _pose_sums,
     best_rotations,
     check_dtype,
     fit_rotations,
 )
-from arapkit.arap.problem import ARAPProblem
-from arapkit.errors import InputError
-from arapkit.mesh.model import bounding_box_diagonal
-from arapkit.mesh.weights import DEFAULT_WEIGHTS
-from arapkit.validate import iteration_cap, tolerance
+from .arap.problem import ARAPProblem
+from .errors import InputError
+from .mesh.model import bounding_box_diagonal
+from .mesh.weights import DEFAULT_WEIGHTS
+from .validate import iteration_cap, tolerance
 
 __all__ = ["ARAPLayer", "arap_energy"]
 
@@ -159,7 +159,7 @@ def _pcg(apply_H, precond, g: _torch.Tensor, tol: float, max_iter: int):
 
 def _check_layer_energy(energy: str) -> None:
     """Refuse, in one line, a method the layer does not offer (the registry's "torch" door)."""
-    from arapkit.methods.registry import method, method_names
+    from .methods.registry import method, method_names
 
     if energy not in method_names():
         known = method_names("library")

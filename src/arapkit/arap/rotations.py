@@ -43,7 +43,7 @@ import math
 import numba as nb
 import numpy as np
 
-from arapkit.errors import InputError
+from ..errors import InputError
 
 # Largest off-diagonal norm of the Jacobi-rotated Gram matrix, relative to its trace,
 # that counts as converged.  tr(R S) is only second-order sensitive to it; R itself is

@@ -328,7 +328,7 @@ class _Space:
             self._claim(self.input_owner, idx, err)  # one input vertex in two groups
             self.input_owner[idx] = number
             self.listed.append((idx, targets))
-            from arapkit.mesh.welding import weld_handles
+            from ..mesh.welding import weld_handles
 
             idx, targets = weld_handles(self.welded, idx, targets, what=self.source)
             # copies already held by an earlier indices group stay there
@@ -353,7 +353,7 @@ class _Space:
     def check_copies(self) -> None:
         """Refuse copies of one position sent to different targets by different groups."""
         if self.listed:
-            from arapkit.mesh.welding import weld_handles
+            from ..mesh.welding import weld_handles
 
             weld_handles(self.welded, np.concatenate([i for i, _ in self.listed]),
                          np.concatenate([t for _, t in self.listed]), what=self.source)
@@ -401,7 +401,7 @@ def load_handles(
         hs = load_sel(path, vertices, load_def(transform), transform)
         if welded is None:
             return hs
-        from arapkit.mesh.welding import weld_handle_set
+        from ..mesh.welding import weld_handle_set
 
         return weld_handle_set(welded, hs)  # statuses number the input's vertices
     if transform is not None:

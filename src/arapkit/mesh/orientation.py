@@ -33,8 +33,8 @@ import dataclasses
 
 import numpy as np
 
-from arapkit.errors import InputError
-from arapkit.mesh.model import bounding_box_diagonal
+from ..errors import InputError
+from .model import bounding_box_diagonal
 
 __all__ = [
     "AXES",

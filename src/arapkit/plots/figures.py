@@ -24,7 +24,7 @@ import os
 import sys
 from collections.abc import Mapping, Sequence
 
-from arapkit.errors import InputError, require_extra
+from ..errors import InputError, require_extra
 
 # one line naming the extra instead of a bare "No module named 'matplotlib'"
 require_extra("matplotlib", "plots", "arapkit.plots")
@@ -35,10 +35,10 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.ticker import MaxNLocator  # noqa: E402
 
-from arapkit.io import atomic_open, check_figure_format  # noqa: E402
-from arapkit.mesh.orientation import view_frame  # noqa: E402
-from arapkit.plots.colors import ENERGY_CMAP  # noqa: E402
-from arapkit.plots.render import (  # noqa: E402
+from ..io import atomic_open, check_figure_format  # noqa: E402
+from ..mesh.orientation import view_frame  # noqa: E402
+from .colors import ENERGY_CMAP  # noqa: E402
+from .render import (  # noqa: E402
     DEFAULT_MAX_FACES,
     FIXED_COLOR,
     MOVED_COLOR,

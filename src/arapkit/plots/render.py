@@ -25,9 +25,9 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from arapkit.errors import require_extra
-from arapkit.mesh.orientation import view_frame
-from arapkit.plots.colors import ENERGY_CMAP, ring_rgb
+from ..errors import require_extra
+from ..mesh.orientation import view_frame
+from .colors import ENERGY_CMAP, ring_rgb
 
 # one line naming the extra instead of a bare "No module named 'matplotlib'"
 require_extra("matplotlib", "plots", "arapkit.plots")
