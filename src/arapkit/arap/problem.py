@@ -30,7 +30,7 @@ import numpy as np
 from ..errors import Advice, InputError
 from ..mesh.weights import SOUND_WEIGHTS
 from .constraints import Elimination, anchor_components, check_handles
-from .energies import make_energy
+from .energies import energy_info, make_energy
 from .graph import EdgeGraph, bandwidth_order, check_graph, unit_scale
 from .rings import check_rings
 
@@ -217,7 +217,7 @@ class ARAPProblem:
         >>> int(p.energy.rings.max())
         3
         """
-        if self.energy.name != "rring":
+        if not energy_info(self.energy.name).rigidity_map:
             raise InputError(f"energy '{self.energy.name}' has no rigidity map")
         t0 = time.perf_counter()
         r = check_rings(rings, self.n_vertices)

@@ -361,16 +361,16 @@ def _method_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
+    from arapkit.methods.registry import method
     from arapkit.workflows.jobs import describe_rings
 
-    if args.energy == "rring":
+    info = method(args.energy)
+    if info.rigidity_map:
         return f"r = {describe_rings(r)}"
     opts = _method_options(args)
-    if args.energy == "sr-arap":
-        return f"SR-ARAP, alpha = {opts['sr_alpha']:g}"
-    if args.energy == "embedded":
-        return f"embedded deformation, {opts['nodes']} nodes"
-    return args.energy
+    shown = [o.describe.format(opts[k]) for k, o in info.options.items()
+             if o.describe is not None and k in opts]
+    return ", ".join([info.label, *shown])
 
 
 def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:

@@ -73,7 +73,7 @@ register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP",
 register(_local_global_method(
     "sr-arap", "SR-ARAP",
     # sr_roi's vertex ids are checked where the mesh is known (make_energy)
-    options={"sr_alpha": MethodOption("alpha", DEFAULT_ALPHA, check_alpha),
+    options={"sr_alpha": MethodOption("alpha", DEFAULT_ALPHA, check_alpha, "alpha = {:g}"),
              "sr_roi": MethodOption("roi", None, lambda roi: roi)},
     interfaces=frozenset(INTERFACES) - {"torch"},
     why_not={"torch": "its rotation coupling has no per-step fixed point"}))

@@ -76,7 +76,7 @@ def check_nodes(nodes) -> int:
 # mesh (docs/methods.md)
 register(MethodInfo(
     "embedded", "embedded deformation", local_global=False, descent=True, handle_tol=2e-2,
-    options={"nodes": MethodOption("nodes", DEFAULT_NODES, check_nodes)},
+    options={"nodes": MethodOption("nodes", DEFAULT_NODES, check_nodes, "{} nodes")},
     interfaces=frozenset({"library", "cli", "compare", "batch", "editor"}),
     why_not={"torch": "it is not a local/global energy"}))
 

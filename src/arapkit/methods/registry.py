@@ -46,11 +46,14 @@ class MethodOption:
         The value used when the option is not given.
     check : callable(value) -> value
         Validates a given value (a one-line InputError otherwise).
+    describe : str, optional
+        How reports and figure titles show the value (``"alpha = {:g}"``); None: not shown.
     """
 
     key: str
     default: Any
     check: Callable[[Any], Any]
+    describe: str | None = None
 
 
 @dataclass(frozen=True)

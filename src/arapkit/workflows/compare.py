@@ -103,20 +103,20 @@ def run_comparison(mesh: Mesh, handles, targets, *, rings: int = 3,
     (['ARAP', 'SR-ARAP', 'embedded', 'r-ring r=2'], True)
     """
     from ..methods.deformer import Deformer
+    from ..methods.registry import method
 
     targets = np.asarray(targets, dtype=np.float64)
     runs = []
     for label, kw in method_list(rings, rings_map, volumetric):
         kw = dict(kw)
-        if kw["energy"] == "sr-arap" and sr_alpha is not None:
-            kw["sr_alpha"] = sr_alpha
-        if kw["energy"] == "embedded":
-            if nodes is not None:
-                kw["nodes"] = nodes
-            kw["tol"] = min(tol, 1e-6)  # Gauss-Newton steps: a tighter test costs little
-        # embedded deformation has no edge weights; the volume's edges have their own
-        weights_kw = {} if kw["energy"] == "embedded" or kw.get("volumetric") else {
-            "weights": weights}
+        info = method(kw["energy"])
+        given = {"sr_alpha": sr_alpha, "nodes": nodes}
+        kw.update({k: v for k, v in given.items() if k in info.options and v is not None})
+        if not info.local_global:
+            kw["tol"] = min(tol, 1e-6)  # its own solver's steps (Gauss-Newton): cheap to tighten
+        # only the local/global energies take edge weights; the volume's edges have their own
+        weights_kw = {"weights": weights} if info.local_global and not kw.get("volumetric") \
+            else {}
         t0 = time.perf_counter()
         d = Deformer(mesh, handles, max_iter=max_iter, **({"tol": tol} | kw), **weights_kw)
         with progress(label) if progress is not None else nullcontext() as cb:
