@@ -65,7 +65,10 @@ def same_process(a: str, b: str, blocks: int) -> None:
     sys.path.insert(0, str(Path(b).resolve()))
     sys.path.insert(0, str(tmp))
     sys.path.insert(0, str(HERE))
-    from arapkit_a.solver import Deformer as DeformerA
+    try:  # tree A in the layered layout, or older (flat modules)
+        from arapkit_a.methods.deformer import Deformer as DeformerA
+    except ImportError:
+        from arapkit_a.solver import Deformer as DeformerA
     from bench_arap import DATA, drag_problem
 
     from arapkit import Deformer, load_mesh

@@ -36,7 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from arapkit import Deformer, Mesh, load_mesh
-from arapkit.shapes import bar, bar_bend
+from arapkit.mesh.shapes import bar, bar_bend
 
 DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "meshes"
 
@@ -164,7 +164,7 @@ def check_energy_factor(mesh: Mesh) -> float:
     import igl
 
     L = igl.cotmatrix(mesh.vertices, mesh.faces).tocsr()
-    from arapkit.weights import edge_weights
+    from arapkit.mesh.weights import edge_weights
 
     w = edge_weights(mesh)
     Lw = np.asarray(L[mesh.edges[:, 0], mesh.edges[:, 1]]).ravel()
@@ -262,7 +262,7 @@ def scale_child(name: str, times: int, r: int, iters: int) -> None:
     print(json.dumps(dict(mesh=m.name, n=m.n_vertices, r=r, mesh_s=t_mesh, pre_s=t_pre,
                           iter_ms=1e3 * t_it, global_ms=res.timings["global_ms_per_iter"],
                           local_ms=res.timings["local_ms_per_iter"], rss_gib=rss,
-                          nnz=int(len(d._nb.disk_idx)))))
+                          nnz=int(len(d.problem.energy.nbh.disk_idx)))))
 
 
 def scale(name: str, times: int, iters: int) -> list[list]:

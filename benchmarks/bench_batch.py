@@ -31,7 +31,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from arapkit.batch import augment_jobs, write_jobs
+from arapkit.workflows.batch import augment_jobs, write_jobs
 
 ROOT = Path(__file__).resolve().parents[1]
 MESHES = ROOT.parent / "shared" / "data" / "meshes"

@@ -1,8 +1,8 @@
 """Time the ARAP local step: best-fit rotations for a batch of 3x3 covariances.
 
-Compares :func:`arapkit.rotations.fit_rotations` (vectorised Jacobi SVD, numba
+Compares :func:`arapkit.arap.rotations.fit_rotations` (vectorised Jacobi SVD, numba
 ``prange``) with numpy's batched LAPACK SVD on the same ``(n, 3, 3)`` array, and the
-scalar kernel :func:`arapkit.rotations.rotation_from_covariance` called from a
+scalar kernel :func:`arapkit.arap.rotations.rotation_from_covariance` called from a
 ``prange`` loop (the way a fused user kernel would call it).  Times are wall-clock
 minima over several runs, after a warm-up run that also triggers compilation.
 
@@ -30,7 +30,7 @@ from collections.abc import Callable
 import numba as nb
 import numpy as np
 
-from arapkit.rotations import fit_rotations, rotation_from_covariance
+from arapkit.arap.rotations import fit_rotations, rotation_from_covariance
 
 
 # Not cached: numba keys a caller's cache on the caller's file only, so a cached copy

@@ -1,9 +1,9 @@
 """Volumetric r-ring ARAP against surface ARAP on bends and twists (docs/benchmarks.md).
 
 For every case (handle files in ``benchmarks/volume/``, the cactus twist in ``examples/``; the
-bar is :func:`arapkit.shapes.bar`)
+bar is :func:`arapkit.mesh.shapes.bar`)
 it solves surface ARAP (``arapkit.Deformer``, default weights) and volumetric ARAP
-(:class:`arapkit.volume.VolumetricDeformer`) with the same handles and r, and prints:
+(:class:`arapkit.methods.volumetric.VolumetricDeformer`) with the same handles and r, and prints:
 
 * self-intersecting faces of the deformed surface beyond those at rest (``tests/selfintersect``:
   libigl's triangle-triangle test on AABB-overlapping, non-adjacent pairs);
@@ -39,9 +39,9 @@ from pathlib import Path
 import numpy as np
 
 from arapkit import Deformer, load_mesh
-from arapkit.handles import load_handles
-from arapkit.shapes import bar, bar_bend
-from arapkit.volume import (
+from arapkit.io import load_handles
+from arapkit.mesh.shapes import bar, bar_bend
+from arapkit.methods.volumetric import (
     DEFAULT_DENSITY,
     DEFAULT_VOLUME_WEIGHTS,
     VOLUME_WEIGHTS,

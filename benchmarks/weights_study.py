@@ -35,10 +35,10 @@ from pathlib import Path
 import numpy as np
 import scipy.sparse as sp
 
-import arapkit.solver as solver
+import arapkit.methods.deformer as solver
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.handles import load_handles
-from arapkit.weights import CLAMP_FRACTION, edge_weights
+from arapkit.io import load_handles
+from arapkit.mesh.weights import CLAMP_FRACTION, edge_weights
 
 ROOT = Path(__file__).resolve().parents[1]
 MESHES = ROOT.parent / "shared" / "data" / "meshes"

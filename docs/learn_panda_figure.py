@@ -37,8 +37,8 @@ def regions(V: np.ndarray) -> dict[str, np.ndarray]:
 
 def main(argv: list[str]) -> int:
     from arapkit import Mesh, learn_rings
-    from arapkit.learn import rings_figure
-    from arapkit.plots import save_figure
+    from arapkit.learn.fit import rings_figure
+    from arapkit.plots.figures import save_figure
 
     if not DATA.exists():
         print(f"skipped: {DATA} not found")

@@ -30,8 +30,8 @@ def gallery() -> None:
     import matplotlib.pyplot as plt
 
     from arapkit import guess_up, load_mesh
-    from arapkit.orientation import view_frame
-    from arapkit.plots import render_mesh, save_figure
+    from arapkit.mesh.orientation import view_frame
+    from arapkit.plots.figures import render_mesh, save_figure
 
     items = []
     for p in sorted((DATA / "meshes").iterdir()):
@@ -55,7 +55,7 @@ def gallery() -> None:
 
 def cactus() -> None:
     from arapkit import Deformer, load_handles, load_mesh
-    from arapkit.plots import deformation_figure, groups_figure, save_figure
+    from arapkit.plots.figures import deformation_figure, groups_figure, save_figure
 
     mesh = load_mesh(ROOT / "examples" / "cactus.off")
     hs = load_handles(ROOT / "examples" / "cactus.json", mesh.vertices)
@@ -71,8 +71,8 @@ def cactus() -> None:
 
 def bar_scale() -> None:
     from arapkit import Deformer
-    from arapkit.plots import save_figure, series_figure
-    from arapkit.shapes import bar, bar_bend
+    from arapkit.mesh.shapes import bar, bar_bend
+    from arapkit.plots.figures import save_figure, series_figure
 
     mesh = bar()
     h, t = bar_bend(mesh, 180)

@@ -28,10 +28,10 @@ def main(argv: list[str]) -> int:
     import matplotlib.pyplot as plt
 
     from arapkit import Deformer, load_mesh
-    from arapkit.handles import load_handles
-    from arapkit.orientation import view_frame
-    from arapkit.plots import render_mesh, save_figure
-    from arapkit.volume import VolumetricDeformer, mesh_volume
+    from arapkit.io import load_handles
+    from arapkit.mesh.orientation import view_frame
+    from arapkit.methods.volumetric import VolumetricDeformer, mesh_volume
+    from arapkit.plots.figures import render_mesh, save_figure
 
     sys.path.insert(0, str(ROOT / "tests"))
     from selfintersect import self_intersecting_faces

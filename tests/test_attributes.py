@@ -16,8 +16,8 @@ import numpy as np
 import pytest
 
 from arapkit import Deformer, load_mesh
-from arapkit.attributes import polygon_area_vectors
-from arapkit.fileio import save_mesh
+from arapkit.io import save_mesh
+from arapkit.mesh.attributes import polygon_area_vectors
 
 CUBE_V = np.array(
     [[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]],

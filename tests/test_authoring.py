@@ -179,7 +179,7 @@ def test_names_the_readme_uses_are_importable_from_arapkit():
 
 
 def test_kernel_value_errors_are_input_errors():
-    from arapkit.rotations import fit_rotations
+    from arapkit.arap.rotations import fit_rotations
 
     with pytest.raises(InputError, match=r"shape \(n, 3, 3\), got \(2, 3\)"):
         fit_rotations(np.ones((2, 3)))

@@ -24,9 +24,15 @@ import pytest
 from conftest import data_path
 
 from arapkit.cli import main
-from arapkit.fileio import read_ply_vertex_properties, save_mesh
-from arapkit.handles import parse_handles, save_def, save_rings, save_sel
-from arapkit.shapes import bar
+from arapkit.io import (
+    parse_handles,
+    read_ply_vertex_properties,
+    save_def,
+    save_mesh,
+    save_rings,
+    save_sel,
+)
+from arapkit.mesh.shapes import bar
 
 HAVE_DASK = importlib.util.find_spec("distributed") is not None
 needs_dask = pytest.mark.skipif(not HAVE_DASK, reason="dask/distributed not installed "
@@ -227,13 +233,13 @@ def test_rerun_skips_and_no_resume_redoes(data, cluster):
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.xyz"}',
          ":3: x.xyz: unsupported mesh format"),
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.ply", "rings": 0}',
-         ":3: 'rings' must be an integer >= 1, got 0"),
+         ":3: 'rings': must be at least 1, got 0"),
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.ply", "energy": "sr"}',
          ":3: energy sr is not available in this build"),
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.ply", "rings": 2, '
          '"rings_file": "r.txt"}', ":3: give 'rings' or 'rings_file', not both"),
         ('{"mesh": "bar.off", "handles": "bend.json", "output": "x.ply", "tol": -1}',
-         ":3: 'tol' must be a positive number"),
+         ":3: 'tol': must be at least 0, got -1"),
     ],
 )
 def test_malformed_job_file_exit_2_writes_nothing(data, capsys, line, message):
@@ -262,7 +268,7 @@ def test_batch_without_dask_says_how_to_install(data, monkeypatch, capsys):
 
 @needs_dask
 def test_library_run_returns_summary_rows(data, cluster, monkeypatch):
-    from arapkit import batch
+    from arapkit.workflows import batch
 
     folder, mesh, jobs = data
     monkeypatch.chdir(folder)  # job paths given as objects are relative to the current folder
@@ -277,8 +283,46 @@ def test_library_run_returns_summary_rows(data, cluster, monkeypatch):
     assert report["command"][:3] == ["arapkit", "deform", str(folder / "bar.off")]
 
 
+def test_jobs_follow_the_library_rules_and_defaults(tmp_path, capsys):
+    """A job field takes the rule and the default of the library parameter it sets."""
+    from arapkit import Deformer, InputError
+    from arapkit.mesh.shapes import bar_bend
+    from arapkit.methods.deformer import INITS
+    from arapkit.validate import MAX_ITER_LIMIT, MAX_RINGS
+    from arapkit.workflows.batch import job_spec, normalise_job
+
+    base = {"mesh": "/m.off", "handles": "/h.json", "output": "a.ply"}
+    m = bar(segments=(7, 1, 1))
+    h, _ = bar_bend(m, 30)
+    # tol = 0 (run to max_iter) is a valid tolerance for both
+    assert normalise_job({**base, "tol": 0})["tol"] == 0.0
+    assert Deformer(m, h, tol=0).tol == 0.0
+    # r and max_iter above the library's caps: refused by the job, deform and the API alike
+    for key, flag, value in (("rings", "--rings", MAX_RINGS + 1),
+                             ("max_iter", "--max-iter", MAX_ITER_LIMIT + 1)):
+        rule = f"must be at most {value - 1}, got {value}"
+        with pytest.raises(InputError) as job_error:
+            normalise_job({**base, key: value})
+        assert str(job_error.value) == f"job: '{key}': {rule}"
+        assert main(["deform", "/m.off", "-H", "/h.json", "-o", str(tmp_path / "o.ply"),
+                     flag, str(value)]) == 2
+        assert rule in capsys.readouterr().err
+        # the API names the same limit (per vertex for a rigidity map)
+        api_rule = f"r must be 1..{MAX_RINGS}" if key == "rings" else rule
+        with pytest.raises(InputError, match=api_rule.replace(".", r"\.")):
+            Deformer(m, h, **{key: value})
+    with pytest.raises(InputError, match=f"'init' must be {' or '.join(INITS)}"):
+        normalise_job({**base, "init": "random"})
+    # a job that leaves everything out solves with the Deformer's own defaults
+    spec = job_spec(normalise_job(base))
+    deformer = Deformer(m, h)
+    assert (spec.tol, spec.max_iter, spec.init, spec.energy, spec.accelerate) == (
+        deformer.tol, deformer.max_iter, deformer.init, deformer.energy, deformer.accelerate)
+    assert spec.weights == deformer.weights_kind and spec.rings == int(deformer.rings[0])
+
+
 def test_job_hash_follows_parameters_and_input_files(tmp_path):
-    from arapkit.batch import job_hash, normalise_job
+    from arapkit.workflows.batch import job_hash, normalise_job
 
     m = bar(segments=(7, 1, 1))
     save_mesh(tmp_path / "m.off", m.vertices, m.faces)
@@ -302,7 +346,7 @@ def test_job_hash_follows_parameters_and_input_files(tmp_path):
 
 @needs_dask
 def test_augment_is_reproducible_and_runs(data, cluster):
-    from arapkit.batch import augment_jobs
+    from arapkit.workflows.batch import augment_jobs
 
     folder, mesh, _ = data
     a = augment_jobs([folder / "bar.off"], 3, seed=7)
@@ -358,8 +402,8 @@ def _sequences(mesh):
 
 @needs_dask
 def test_learn_sequences_on_dask_equal_one_process(cluster):
-    from arapkit.batch import dask_map
-    from arapkit.learn import learn_rings, learn_rings_sequences
+    from arapkit.learn.fit import learn_rings, learn_rings_sequences
+    from arapkit.workflows.batch import dask_map
 
     mesh = bar(segments=(35, 3, 3))
     seq_a, seq_b, seq_c = _sequences(mesh)
@@ -375,7 +419,7 @@ def test_learn_sequences_on_dask_equal_one_process(cluster):
     np.testing.assert_array_equal(dist.rings, one.rings)
     assert len(np.unique(one.rings)) > 1  # a map that says something
     # the mean is by example count: a per-sequence brute force mean agrees
-    from arapkit.learn import ring_energies
+    from arapkit.learn.fit import ring_energies
 
     tables = [ring_energies(mesh, s, 1, 4)[0] for s in seqs]
     brute = sum(len(s) * t for s, t in zip(seqs, tables)) / 5
@@ -386,8 +430,8 @@ def test_learn_sequences_on_dask_equal_one_process(cluster):
 def test_learn_panda_walk_split_in_sequences(cluster):
     """The real 61-frame walk as three sequences on the cluster: the one-process map."""
     from arapkit import Mesh
-    from arapkit.batch import dask_map
-    from arapkit.learn import learn_rings, learn_rings_sequences
+    from arapkit.learn.fit import learn_rings, learn_rings_sequences
+    from arapkit.workflows.batch import dask_map
 
     with np.load(data_path("sequences", "panda_walk_seq.npz")) as d:
         V, F = d["V"].astype(np.float64), d["F"]
@@ -517,7 +561,7 @@ def test_dry_run_counts_groups_without_dask_or_output(data, capsys, monkeypatch)
     """--dry-run resolves each job's handles (counts taken here from the box selections and
     the .sel file), reports an unreadable job as failed and writes nothing; Dask is not
     needed."""
-    from arapkit import batch
+    from arapkit.workflows import batch
 
     folder, mesh, jobs = data
     jobs = [*jobs[:2], {"mesh": "broken.off", "handles": "bend.json", "output": "broken.ply"}]
@@ -542,7 +586,7 @@ def test_dry_run_counts_groups_without_dask_or_output(data, capsys, monkeypatch)
 def test_unwritable_output_folder_is_refused_before_any_job(data, locked, capsys, monkeypatch):
     """An output folder that cannot take files is found before a cluster starts or a job
     runs, and the message names the user's path (issue: outputs checked first)."""
-    from arapkit import batch
+    from arapkit.workflows import batch
 
     folder, _, _ = data
     monkeypatch.setattr(batch, "_local_cluster",

@@ -19,9 +19,8 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from arapkit.fileio import read_ply_vertex_properties, save_mesh
-from arapkit.handles import save_def, save_rings, save_sel
-from arapkit.shapes import bar, bar_bend, bar_two_materials
+from arapkit.io import read_ply_vertex_properties, save_def, save_mesh, save_rings, save_sel
+from arapkit.mesh.shapes import bar, bar_bend, bar_two_materials
 
 ROOT = Path(__file__).resolve().parents[1]
 MESHES = ROOT.parent / "shared" / "data" / "meshes"
@@ -88,6 +87,16 @@ def test_version_and_help_with_examples():
         assert h.returncode == 0 and "examples:" in h.stdout and f"arapkit {cmd}" in h.stdout
     none = arapkit()
     assert none.returncode == 2 and "usage" in none.stderr
+
+
+def test_version_has_one_source():
+    """``arapkit.__version__``, ``--version`` and reports all read the package metadata."""
+    from importlib.metadata import version
+
+    import arapkit as package
+
+    assert package.__version__ == version("arapkit")
+    assert arapkit("--version").stdout.strip() == f"arapkit {package.__version__}"
 
 
 # --------------------------------------------------------------------------- deform

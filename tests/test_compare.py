@@ -13,9 +13,9 @@ import pytest
 from conftest import data_path
 
 from arapkit import Deformer, Mesh, load_mesh
-from arapkit.fileio import read_ply_vertex_properties
-from arapkit.quality import folded_edge_fraction, volume_change
-from arapkit.shapes import bar
+from arapkit.io import read_ply_vertex_properties
+from arapkit.mesh.quality import folded_edge_fraction, volume_change
+from arapkit.mesh.shapes import bar
 
 
 def brute_folded_fraction(mesh: Mesh, P: np.ndarray, degrees: float = 60.0) -> float:
@@ -168,7 +168,7 @@ def test_compare_volumetric_row_keeps_the_volume(tmp_path):
     1 %, measured here from the written mesh) where surface ARAP loses several percent; an
     open surface is refused before any method runs."""
     pytest.importorskip("meshio")
-    from arapkit.volume import have_mesher, mesh_volume
+    from arapkit.methods.volumetric import have_mesher, mesh_volume
 
     if not have_mesher():
         pytest.skip("the tetrahedral mesher (pip install 'arapkit[volume]') is not installed")

@@ -1,10 +1,11 @@
 """Every method through every interface that offers it: the method x interface matrix.
 
-The matrix is generated from the library's own tables (:data:`arapkit.energy.CAPABILITIES`,
-:data:`arapkit.energy.INTERFACES`, :data:`arapkit.energy.VOLUMETRIC_INTERFACES`, the
-editor's :data:`arapkit.editor.state.METHODS`), so a newly registered method joins it and
-an interface that claims a method but cannot run it fails here. A cell either runs (exit
-0, finite, deformed, handles met: to round-off for hard constraints, within the method's
+The matrix is generated from the method registry (:mod:`arapkit.methods.registry`: the
+methods, :data:`~arapkit.methods.registry.INTERFACES`,
+:data:`~arapkit.methods.registry.VOLUMETRIC_INTERFACES`) and the editor's selector
+(:func:`arapkit.editor.settings.solver_choices`), so a newly registered method joins it and
+an interface that claims a method but cannot run it fails here. A cell either runs (exit 0,
+finite, deformed, handles met: to round-off for hard constraints, within the method's
 ``handle_tol`` for soft ones) or is refused with its one-line message (exit 2 on the
 command line).
 """
@@ -20,10 +21,14 @@ import numpy as np
 import pytest
 
 from arapkit import Deformer
-from arapkit.energy import CAPABILITIES, ENERGIES, INTERFACES, VOLUMETRIC_INTERFACES
 from arapkit.errors import InputError
-from arapkit.handles import load_handles, save_rings
-from arapkit.mesh import load_mesh
+from arapkit.io import load_handles, load_mesh, save_rings
+from arapkit.methods.registry import (
+    INTERFACES,
+    VOLUMETRIC_INTERFACES,
+    method,
+    method_names,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 MESH = ROOT / "examples" / "cactus.off"
@@ -32,6 +37,9 @@ HANDLES = ROOT / "examples" / "cactus.json"
 HARD_TOL = 1e-9
 #: free vertices must move at least this much (relative to the diagonal): the arms swing
 MIN_MOTION = 0.02
+#: what a door that can name a method it does not offer says
+NOT_OFFERED = {"library": "unknown energy", "cli": "unknown energy",
+               "batch": "is not available in this build", "torch": "is not available in ARAPLayer"}
 
 
 @dataclass(frozen=True)
@@ -52,11 +60,11 @@ class Variant:
 
     def refusal(self, interface: str) -> str | None:
         """The fragment of the one-line refusal this cell must give; None if it runs."""
-        can = CAPABILITIES[self.energy]
-        if interface not in can.interfaces:
-            return "is not available in ARAPLayer"
+        can = method(self.energy)
         if self.volumetric and interface not in VOLUMETRIC_INTERFACES:
             return "unknown key 'volumetric'"
+        if interface not in can.interfaces:
+            return NOT_OFFERED[interface]
         if self.volumetric and not can.volumetric:
             return "volumetric=True runs r-ring ARAP"
         if self.rings != "1" and not can.rigidity_map:
@@ -71,8 +79,8 @@ def _variants() -> list[Variant]:
     runs it), so that a refusal has one reason.
     """
     out = []
-    for e in ENERGIES:
-        vol_r = "mixed" if CAPABILITIES[e].rigidity_map else "1"
+    for e in method_names():
+        vol_r = "mixed" if method(e).rigidity_map else "1"
         out += [Variant(e), Variant(e, "3"), Variant(e, "mixed"),
                 Variant(e, vol_r, volumetric=True), Variant(e, init="laplacian")]
     return out
@@ -81,7 +89,7 @@ def _variants() -> list[Variant]:
 #: which interfaces can even express a variant (the editor has no "--init"; compare and the
 #: editor take no method name for a method they do not list, the layer has no volume)
 def _expressible(v: Variant, interface: str) -> bool:
-    can = CAPABILITIES[v.energy]
+    can = method(v.energy)
     if interface == "compare":  # runs its fixed set: nothing to ask, nothing to refuse
         return interface in can.interfaces and v.refusal(interface) is None \
             and v.init == "identity"
@@ -93,10 +101,10 @@ def _expressible(v: Variant, interface: str) -> bool:
     return True
 
 
-def _editor_panel_methods() -> tuple[str, ...]:
-    from arapkit.editor.state import METHODS
+def _editor_panel_choices() -> list:
+    from arapkit.editor.settings import solver_choices
 
-    return METHODS
+    return [pytest.param(c, id=c.label) for c in solver_choices()]
 
 
 CELLS = [pytest.param(v, i, id=f"{v.id}@{i}") for v in _variants() for i in INTERFACES
@@ -136,7 +144,7 @@ def _check_deformed(v: Variant, V: np.ndarray) -> None:
     free = np.setdiff1d(np.arange(mesh.n_vertices), hs.indices)
     assert np.linalg.norm(V[free] - mesh.vertices[free], axis=1).max() > MIN_MOTION * diag
     err = np.linalg.norm(V[hs.indices] - hs.targets, axis=1).max()
-    assert err <= max(CAPABILITIES[v.energy].handle_tol, HARD_TOL) * diag
+    assert err <= max(method(v.energy).handle_tol, HARD_TOL) * diag
 
 
 # ---------------------------------------------------------------------------- interfaces
@@ -150,7 +158,7 @@ def _library(v: Variant, folder: Path) -> np.ndarray:
 
 
 def _ply(path: Path) -> np.ndarray:
-    from arapkit.fileio import read_ply_vertex_properties
+    from arapkit.io import read_ply_vertex_properties
 
     p = read_ply_vertex_properties(path)
     return np.stack([p["x"], p["y"], p["z"]], axis=1)
@@ -181,7 +189,7 @@ def _deform(v: Variant, folder: Path, capsys) -> np.ndarray:
 def _compare_run(folder: Path) -> tuple[dict, Path]:
     """``arapkit compare`` once, with r = 3, the mixed map and the volume: label -> kw."""
     from arapkit.cli import main
-    from arapkit.compare import method_list
+    from arapkit.workflows.compare import method_list
 
     out = folder / "compare"
     code = main(["compare", str(MESH), "--handles", str(HANDLES), "--rings", "3",
@@ -211,7 +219,7 @@ def _compare(v: Variant, folder: Path, capsys) -> np.ndarray:
 
 
 def _batch(v: Variant, folder: Path, capsys) -> np.ndarray:
-    from arapkit.batch import normalise_job, run_job
+    from arapkit.workflows.batch import normalise_job, run_job
 
     job = {"mesh": str(MESH), "handles": str(HANDLES), "energy": v.energy, "init": v.init,
            "output": f"{v.id}.ply"}
@@ -229,19 +237,19 @@ def _batch(v: Variant, folder: Path, capsys) -> np.ndarray:
 
 
 def _editor(v: Variant, folder: Path, capsys) -> np.ndarray:
-    from arapkit.editor.state import METHODS, SolverSettings
+    from arapkit.editor.settings import SolverSettings, solver_choices
     from arapkit.editor.worker import SolveRequest, SolveWorker
 
     mesh, hs, _ = _case()
-    method = "volumetric" if v.volumetric else ("arap" if v.energy == "rring" else v.energy)
-    assert method in METHODS
+    assert any((c.method, c.volumetric) == (v.energy, v.volumetric) for c in solver_choices())
     updates = []
     w = SolveWorker(updates.append)
     w.start()
     try:
         painted = np.broadcast_to(_rings(v), (mesh.n_vertices,)).astype(np.int32)
         w.submit(SolveRequest(mesh, hs.indices, hs.targets, painted,
-                              SolverSettings(method=method, max_iter=1000)))
+                              SolverSettings(method=v.energy, volumetric=v.volumetric,
+                                             max_iter=1000)))
         assert w.wait_idle(300)
     finally:
         w.stop()
@@ -262,7 +270,7 @@ def _torch(v: Variant, folder: Path, capsys) -> np.ndarray:
     return layer(torch.tensor(hs.targets)).detach().numpy()
 
 
-DRIVERS = {"library": lambda v, folder, capsys: _library(v, folder), "deform": _deform,
+DRIVERS = {"library": lambda v, folder, capsys: _library(v, folder), "cli": _deform,
            "compare": _compare, "batch": _batch, "editor": _editor, "torch": _torch}
 
 
@@ -276,7 +284,7 @@ def test_door(variant: Variant, interface: str, folder: Path, capsys):
     if interface == "batch":
         pytest.importorskip("distributed", reason="batch jobs need arapkit[batch]")
     if variant.volumetric:
-        from arapkit.volume import have_mesher
+        from arapkit.methods.volumetric import have_mesher
 
         if not have_mesher():
             pytest.skip("volumetric ARAP needs pip install 'arapkit[volume]'")
@@ -307,15 +315,16 @@ def test_cli_embedded_with_default_options_writes_its_report(folder, capsys):
     assert rep["method"] == {"energy": "embedded", "nodes": 200}
 
 
-@pytest.mark.parametrize("method", _editor_panel_methods())
-def test_every_editor_panel_method_solves(method: str):
-    """Each method of the editor's solver panel (Laplacian editing included) deforms."""
-    from arapkit.editor.state import SolverSettings
+@pytest.mark.parametrize("choice", _editor_panel_choices())
+def test_every_editor_panel_method_solves(choice):
+    """Each entry of the editor's method selector (Laplacian editing included) deforms."""
+    from arapkit.editor.settings import SolverSettings
     from arapkit.editor.worker import SolveRequest, SolveWorker
 
     mesh, hs, mixed = _case()
-    if method == "volumetric":
-        from arapkit.volume import have_mesher
+    method = choice.method
+    if choice.volumetric:
+        from arapkit.methods.volumetric import have_mesher
 
         if not have_mesher():
             pytest.skip("volumetric ARAP needs pip install 'arapkit[volume]'")
@@ -324,13 +333,14 @@ def test_every_editor_panel_method_solves(method: str):
     w.start()
     try:
         w.submit(SolveRequest(mesh, hs.indices, hs.targets, mixed,
-                              SolverSettings(method=method, max_iter=1000)))
+                              SolverSettings(method=method, volumetric=choice.volumetric,
+                                             max_iter=1000)))
         assert w.wait_idle(300)
     finally:
         w.stop()
     last = updates[-1]
     assert last.final and last.error is None
-    energy = method if method in ENERGIES else "rring"  # the others have hard constraints
+    energy = method if method in method_names() else "rring"  # the others: hard constraints
     _check_deformed(Variant(energy), last.vertices)
 
 
@@ -345,8 +355,8 @@ def test_laplacian_editing_library():
 def test_batch_report_command_reproduces_the_job(folder, capsys):
     """The ``deform`` command a batch report records names the method and its options."""
     pytest.importorskip("distributed", reason="batch jobs need arapkit[batch]")
-    from arapkit.batch import normalise_job, report_path, run_job
     from arapkit.cli import main
+    from arapkit.workflows.batch import normalise_job, report_path, run_job
 
     job = {"mesh": str(MESH), "handles": str(HANDLES), "energy": "embedded", "nodes": 50,
            "output": "cmd.ply"}

@@ -20,7 +20,7 @@ import pytest
 
 from arapkit.cli.edit import build_state
 from arapkit.editor.app import EditorApp
-from arapkit.editor.state import CameraView
+from arapkit.editor.geometry import CameraView
 
 CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = [
@@ -192,7 +192,7 @@ def test_browser_drag_deforms_mesh(tmp_path):
             cam = client.camera
             view = CameraView(np.asarray(cam.position), np.asarray(cam.wxyz),
                               float(cam.fov), float(cam.aspect))
-            arrow = g + 0.5 * 0.12 * app._diag * np.array([0.0, 0.0, 1.0])
+            arrow = g + 0.5 * 0.12 * app.diag * np.array([0.0, 0.0, 1.0])
             uv, _ = view.project(arrow[None])
             x = box["x"] + uv[0, 0] * box["width"]
             y = box["y"] + uv[0, 1] * box["height"]

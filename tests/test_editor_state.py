@@ -14,11 +14,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from arapkit.editor.state import CameraView, EditorState, Handle, raycast
+from arapkit.editor.geometry import CameraView, raycast
+from arapkit.editor.state import EditorState, Handle
 from arapkit.editor.views import face_groups, ring_labels
 from arapkit.editor.worker import SolveRequest, SolveWorker
 from arapkit.errors import InputError
-from arapkit.shapes import bar
+from arapkit.mesh.shapes import bar
 
 CAP, RING = 25, 16  # vertices per end cap / per inner cross-section of the default bar
 
@@ -155,7 +156,7 @@ def test_paint_counts_vertices_in_brush(st):
     assert st.paint(p, r, 4) == expected
     assert int(np.sum(st.rings == 4)) == expected
     assert st.paint(p, r, 4) == 0  # nothing changes: no undo step either
-    assert len(st._undo) == 1
+    assert st.undo() and not st.can_undo  # exactly one step was recorded
 
 
 def test_flood_fill_stops_at_change_of_r(st):
@@ -222,7 +223,7 @@ def test_drag_is_one_undo_step(st):
 
 
 def test_session_round_trip(st, tmp_path):
-    from arapkit.fileio import save_mesh
+    from arapkit.io import save_mesh
 
     mesh_file = tmp_path / "bar.off"
     save_mesh(mesh_file, st.mesh.vertices, st.mesh.faces)
@@ -246,6 +247,33 @@ def test_session_round_trip(st, tmp_path):
     assert np.array_equal(st2.rings, st.rings)
     assert st2.settings == st.settings
     assert a.name == "base"
+
+
+def test_old_session_method_names_load_and_save_as_the_one_name(st, tmp_path):
+    """Sessions of arapkit 0.1 say "arap" or "volumetric": read as r-ring ARAP, written new."""
+    from arapkit.editor.settings import SolverSettings
+    from arapkit.methods.registry import method
+
+    st.add_handle(np.arange(25), name="base", frozen=True)
+    for old, volumetric in (("arap", False), ("volumetric", True)):
+        d = json.loads(json.dumps(st.to_dict()))
+        d["solver"] = {"method": old, "weights": "cotan", "tol": 1e-4, "max_iter": 50,
+                       "live_max_iter": 8, "live_budget_ms": 60.0}  # no "volumetric" key then
+        path = tmp_path / f"{old}.json"
+        path.write_text(json.dumps(d))
+        st2 = EditorState(st.mesh)
+        st2.apply_dict(EditorState.read_session(path))
+        s = st2.settings
+        assert (s.method, s.volumetric) == ("rring", volumetric)
+        assert method(s.method).rigidity_map and s.tol == 1e-4 and s.max_iter == 50
+        saved = json.loads(st2.save_session(tmp_path / f"{old}-new.json").read_text())["solver"]
+        assert saved["method"] == "rring" and saved["volumetric"] is volumetric
+        assert SolverSettings.from_dict(saved) == s
+    # volumetric is offered only where the registry says the method has a volumetric form
+    with pytest.raises(InputError, match="no volumetric form"):
+        SolverSettings.from_dict({"method": "laplacian", "volumetric": True})
+    with pytest.raises(InputError, match="volumetric must be true or false"):
+        SolverSettings.from_dict({"volumetric": "yes"})
 
 
 def test_session_for_another_mesh_is_refused(st, tmp_path):
@@ -282,7 +310,7 @@ def test_face_groups_cover_every_face_once(st):
 
 def test_cli_state_reads_handles_and_rings(tmp_path):
     from arapkit.cli.edit import build_state
-    from arapkit.handles import save_rings
+    from arapkit.io import save_rings
 
     hfile = tmp_path / "h.json"
     hfile.write_text(json.dumps([

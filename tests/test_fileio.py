@@ -1,4 +1,7 @@
-"""Atomic writes, mesh export with vertex properties, JSON reports (arapkit.fileio)."""
+"""Atomic writes, mesh export with vertex properties, JSON reports.
+
+Covers arapkit.io.atomic, .writers and .readers.
+"""
 
 from __future__ import annotations
 
@@ -12,7 +15,7 @@ import pytest
 import trimesh
 
 from arapkit.errors import InputError
-from arapkit.fileio import (
+from arapkit.io import (
     atomic_open,
     atomic_write,
     check_output_path,

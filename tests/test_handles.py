@@ -1,4 +1,4 @@
-"""Handle JSON, .sel/.def and rigidity files (arapkit.handles)."""
+"""Handle JSON, .sel/.def and rigidity files (arapkit.io.handles, .seldef, .rigidity)."""
 
 from __future__ import annotations
 
@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 from arapkit.errors import InputError
-from arapkit.fileio import save_mesh
-from arapkit.handles import (
+from arapkit.io import (
     HandleGroup,
     HandleSet,
     load_def,
@@ -21,6 +20,7 @@ from arapkit.handles import (
     rotation_matrix,
     save_def,
     save_handles,
+    save_mesh,
     save_rings,
     save_sel,
     select_box,
@@ -354,7 +354,7 @@ def test_readme_example_is_valid():
     import re
     from pathlib import Path
 
-    from arapkit.shapes import bar
+    from arapkit.mesh.shapes import bar
 
     readme = Path(__file__).resolve().parents[1] / "README.md"
     text = readme.read_text()

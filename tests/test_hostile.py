@@ -20,9 +20,8 @@ from arapkit import Deformer, Mesh, cli, validate
 from arapkit.editor.state import EditorState, Handle, SolverSettings
 from arapkit.editor.worker import SolveRequest, SolveWorker
 from arapkit.errors import InputError
-from arapkit.fileio import check_output_path, save_mesh
-from arapkit.handles import load_handles, load_rings
-from arapkit.shapes import bar, bar_bend
+from arapkit.io import check_output_path, load_handles, load_rings, save_mesh
+from arapkit.mesh.shapes import bar, bar_bend
 
 # ----------------------------------------------------------------------------- helpers
 
@@ -117,7 +116,7 @@ def test_huge_targets_stop_the_solve_and_write_nothing(capsys, files, motion):
 
 
 def test_huge_def_transform_names_the_def_file(capsys, files, mesh):
-    from arapkit.handles import save_def, save_sel
+    from arapkit.io import save_def, save_sel
 
     tmp, base, tip = files
     save_sel(tmp / "a.sel", mesh.n_vertices, base, tip)
@@ -136,7 +135,7 @@ def test_huge_def_transform_names_the_def_file(capsys, files, mesh):
 
 
 def test_target_reach_is_the_mesh_number_range(tmp_path, mesh):
-    from arapkit.mesh import COORDINATE_RANGE
+    from arapkit.mesh.model import COORDINATE_RANGE
 
     x = mesh.vertices[:, 0]
     base = np.flatnonzero(x <= x.min() + 1e-9).tolist()
@@ -445,7 +444,7 @@ def test_coordinates_too_large_for_energy_blame_the_range(mesh):
 
 
 def test_unit_scale_refuses_spans_beyond_double():
-    from arapkit.solver import unit_scale
+    from arapkit.methods.deformer import unit_scale
 
     assert unit_scale(np.array([[0.0, 0, 0], [3e-200, 0, 0]]), "m") == 2.0 ** -662
     with pytest.raises(InputError, match="span more than double precision"):
@@ -570,7 +569,7 @@ def test_session_uploads_through_the_app(tmp_path, st):
             widget.value = bad  # runs the page's callback, which reports and changes nothing
             assert app.state.settings == settings
             assert app.md_status.content.startswith("⚠")
-            app._quietly(lambda w=widget, v=old: setattr(w, "value", v))
+            app.quietly(lambda w=widget, v=old: setattr(w, "value", v))
     finally:
         app.stop()
 
@@ -635,7 +634,7 @@ def test_load_handles_huge_numbers(tmp_path, mesh):
 
 
 def test_sel_status_other_than_0_1_2_is_refused(tmp_path, mesh):
-    from arapkit.handles import load_sel
+    from arapkit.io import load_sel
 
     p = tmp_path / "a.sel"
     statuses = ["0"] + ["1"] * (mesh.n_vertices - 2) + ["2"]
@@ -700,7 +699,8 @@ def test_npz_member_damaged_after_a_good_directory(capsys, files, mesh):
 
 
 def test_input_files_over_the_cap_are_refused_in_one_line(capsys, files, mesh, monkeypatch):
-    from arapkit.handles import save_def, save_sel
+    from arapkit.io import save_def, save_sel
+    from arapkit.workflows.batch import load_jobs
 
     tmp, base, tip = files
     save_sel(tmp / "a.sel", mesh.n_vertices, base, tip)
@@ -722,7 +722,7 @@ def test_input_files_over_the_cap_are_refused_in_one_line(capsys, files, mesh, m
                         "(set ARAPKIT_MAX_INPUT_MB to raise the cap)")
     monkeypatch.setenv(validate.INPUT_CAP_VARIABLE, "0.001")
     for reader, what in [(lambda p: EditorState.read_session(p), "sessions"),
-                         (lambda p: __import__("arapkit.batch").batch.load_jobs(p), "job files")]:
+                         (lambda p: load_jobs(p), "job files")]:
         with pytest.raises(InputError, match=f"MiB allowed for {what}"):
             reader(tmp / "r.txt")
     # the default cap and a bad override
@@ -737,7 +737,7 @@ _PEAK = """
 import json, sys, tracemalloc
 import numpy as np
 from arapkit.errors import InputError
-from arapkit.handles import load_handles
+from arapkit.io import load_handles
 tracemalloc.start()
 try:
     load_handles(sys.argv[1], np.eye(3))

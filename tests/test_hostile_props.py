@@ -30,7 +30,7 @@ from hypothesis.extra import numpy as hnp  # noqa: E402
 from arapkit import Deformer, Mesh, cli  # noqa: E402
 from arapkit.editor.state import EditorState  # noqa: E402
 from arapkit.errors import InputError  # noqa: E402
-from arapkit.fileio import read_ply_vertex_properties, save_mesh  # noqa: E402
+from arapkit.io import read_ply_vertex_properties, save_mesh  # noqa: E402
 
 SETTINGS = settings(max_examples=150, deadline=None, derandomize=True,
                     suppress_health_check=[HealthCheck.too_slow,

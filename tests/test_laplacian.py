@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 from arapkit import LaplacianEditor, laplacian_edit
-from arapkit.laplacian import differential_operator
-from arapkit.shapes import bar, bar_bend
-from arapkit.weights import cotangent_weights, voronoi_areas
+from arapkit.mesh.shapes import bar, bar_bend
+from arapkit.mesh.weights import cotangent_weights, voronoi_areas
+from arapkit.methods.laplacian import differential_operator
 
 
 @pytest.fixture(scope="module")

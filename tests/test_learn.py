@@ -1,4 +1,4 @@
-"""Learning per-vertex rigidity from deforming shapes (paper sec. 3.4): arapkit.learn + CLI."""
+"""Learning per-vertex rigidity from deforming shapes (paper sec. 3.4): arapkit.learn.fit + CLI."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ from conftest import bfs_distances, data_path
 
 from arapkit import InputError, Mesh, learn_rings
 from arapkit.cli import main
-from arapkit.learn import AUTO_FLOOR, auto_omega, ring_energies, select_rings
-from arapkit.weights import DEFAULT_WEIGHTS, edge_weights, voronoi_areas
+from arapkit.learn.fit import AUTO_FLOOR, auto_omega, ring_energies, select_rings
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, edge_weights, voronoi_areas
 
 JOINT, HALF = 4.0, 0.6  # the limb bends over x in [JOINT - HALF, JOINT + HALF]
 
@@ -117,7 +117,7 @@ def test_energies_match_brute_force_on_panda(weights):
 
 
 def test_example_batches_give_the_same_table(limb, monkeypatch):
-    import arapkit.learn as learn
+    import arapkit.learn.energies as learn
 
     mesh, frames = limb
     whole = ring_energies(mesh, frames, 2, 5, per_example=True)
@@ -271,8 +271,7 @@ def limb_files(tmp_path, limb):
 
 
 def test_cli_folder_writes_rings_ply_and_figure(tmp_path, limb, limb_files, capsys):
-    from arapkit.fileio import read_ply_vertex_properties
-    from arapkit.handles import load_rings
+    from arapkit.io import load_rings, read_ply_vertex_properties
 
     mesh, frames = limb
     out, ply, fig = tmp_path / "r.txt", tmp_path / "r.ply", tmp_path / "r.png"

@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.fileio import save_mesh
-from arapkit.mesh import COORDINATE_RANGE, check_number_range
-from arapkit.weights import DEFAULT_WEIGHTS
+from arapkit.io import save_mesh
+from arapkit.mesh.model import COORDINATE_RANGE, check_number_range
+from arapkit.mesh.weights import DEFAULT_WEIGHTS
 
 TRI = "v 0 0 0\nv 1 0 0\nv 0 1 0\n"
 

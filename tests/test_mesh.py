@@ -10,7 +10,7 @@ import pytest
 from conftest import data_path
 
 from arapkit import InputError, Mesh, load_mesh
-from arapkit.shapes import bar
+from arapkit.mesh.shapes import bar
 
 TRI = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]])
 

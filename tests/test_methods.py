@@ -14,9 +14,10 @@ from cgal_oracle import build_driver, run_cgal
 from conftest import data_path
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.problem import ARAPProblem
-from arapkit.shapes import bar, bar_bend
-from arapkit.weights import _corner_cotangents, edge_weights
+from arapkit.arap.problem import ARAPProblem
+from arapkit.arap.solve import arap_solve
+from arapkit.mesh.shapes import bar, bar_bend
+from arapkit.mesh.weights import corner_cotangents, edge_weights
 
 
 def bend_cylinder(m: Mesh, degrees: float = 60.0):
@@ -44,7 +45,7 @@ def cylinder():
 def brute_spokes_rims_energy(m: Mesh, P, R) -> float:
     """Chao et al.'s energy, triangle by triangle with half cotangents (libigl's form)."""
     V, F = m.vertices, m.faces
-    cots = _corner_cotangents(V, F)
+    cots = corner_cotangents(V, F)
     E = 0.0
     for t, f in enumerate(F):
         for c in range(3):
@@ -116,7 +117,7 @@ def test_sr_arap_matches_cgal(cgal_driver, cylinder, tmp_path, alpha):
     m, h, T = cylinder
     # CGAL clamps negative cotangents to 0; on this mesh none is negative, so its weights
     # are exactly arapkit's "cotan"
-    assert _corner_cotangents(m.vertices, m.faces).min() >= 0
+    assert corner_cotangents(m.vertices, m.faces).min() >= 0
     U = run_cgal(cgal_driver, data_path("meshes", "cylinder.off"), h, T, "sre", alpha, tmp_path)
     res = Deformer(m, h, weights="cotan", energy="sr-arap", sr_alpha=alpha).solve(
         T, tol=1e-12, max_iter=20000)
@@ -141,7 +142,7 @@ def obtuse_partial_roi(tmp_path_factory):
     """A sheared, jittered bar (many obtuse corners, edges with both opposite angles obtuse)
     posed as a ``.sel`` would be: the left end outside the ROI (status 0), the right end the
     control vertices (status 2, turned 90 degrees and shifted), the rest the ROI (1)."""
-    from arapkit.fileio import save_mesh
+    from arapkit.io import save_mesh
 
     b = bar(length=3.0, segments=(15, 3, 3))
     rng = np.random.default_rng(1)
@@ -171,7 +172,7 @@ CGAL_POSED = {"sre": ("sr-arap", "cotan-clamped-each", True),
 def test_cgal_problem_on_obtuse_mesh_with_partial_roi(cgal_driver, obtuse_partial_roi,
                                                        tmp_path, tag):
     m, path, outside, control, moved, roi = obtuse_partial_roi
-    cots = _corner_cotangents(m.vertices, m.faces)
+    cots = corner_cotangents(m.vertices, m.faces)
     assert (cots < 0).sum() > 200  # obtuse enough for the weightings to differ
     # CGAL solves the ROI only; arapkit holds the vertices outside it as handles at rest
     U = run_cgal(cgal_driver, path, control, moved, tag, 0.02, tmp_path, roi=roi,
@@ -276,7 +277,7 @@ def test_problem_from_graph_equals_mesh_solve():
     w = edge_weights(m)
     ref = Deformer(m, h, rings=2).solve(t, max_iter=15, tol=0)
     p = ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=2, name="bar graph")
-    res = p.solve(t, max_iter=15, tol=0)
+    res = arap_solve(p, t, max_iter=15, tol=0)
     assert np.abs(res.vertices - ref.vertices).max() < 1e-12 * m.bounding_box_diagonal
     assert np.allclose(res.history, ref.history, rtol=1e-12, atol=0)
 
@@ -286,11 +287,11 @@ def test_problem_with_rings_equals_a_fresh_build():
     h, t = bar_bend(m, 90)
     w = edge_weights(m)
     rings = np.where(m.vertices[:, 0] > 3.5, 1, 4)
-    fresh = ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=rings).solve(
-        t, max_iter=10, tol=0)
+    fresh = arap_solve(ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=rings), t,
+                       max_iter=10, tol=0)
     p = ARAPProblem.from_graph(m.vertices, m.edges, w, h, rings=2)
-    p.solve(t, max_iter=2, tol=0)
-    res = p.with_rings(rings).solve(t, max_iter=10, tol=0)
+    arap_solve(p, t, max_iter=2, tol=0)
+    res = arap_solve(p.with_rings(rings), t, max_iter=10, tol=0)
     assert np.abs(res.vertices - fresh.vertices).max() < 1e-12 * m.bounding_box_diagonal
     with pytest.raises(InputError, match="vertex 0 has r = 0"):
         p.with_rings(np.zeros(m.n_vertices, int))
@@ -304,7 +305,7 @@ def test_problem_from_graph_tet_rigid():
     Q = np.array([[np.cos(th), -np.sin(th), 0], [np.sin(th), np.cos(th), 0], [0, 0, 1]])
     moved = V @ Q.T + [0.5, -2.0, 1.0]
     p = ARAPProblem.from_graph(V, E, np.ones(len(E)), [0, 1, 2], rings=2)
-    res = p.solve(moved[[0, 1, 2]], tol=1e-14, max_iter=500)
+    res = arap_solve(p, moved[[0, 1, 2]], tol=1e-14, max_iter=500)
     assert np.abs(res.vertices - moved).max() < 1e-6
     assert np.abs(res.vertices - V).max() > 1.0  # it moved
 
@@ -346,7 +347,7 @@ def cli(*args):
 def bar_case(tmp_path_factory):
     import json
 
-    from arapkit.fileio import save_mesh
+    from arapkit.io import save_mesh
 
     d = tmp_path_factory.mktemp("methods")
     m = bar()
@@ -400,7 +401,7 @@ def test_cli_offers_cgal_weights(bar_case):
 
 
 def test_embedded_meets_handles_descends_and_does_not_fold():
-    from arapkit.quality import folded_edge_fraction
+    from arapkit.mesh.quality import folded_edge_fraction
 
     m = bar()
     h, t = bar_bend(m, 90)
@@ -495,7 +496,7 @@ def test_embedded_init_positions_are_honoured():
 
 
 def test_embedded_warm_start_and_laplacian_init():
-    from arapkit.laplacian import LaplacianEditor
+    from arapkit.methods.laplacian import LaplacianEditor
 
     m = bar()
     h, t = bar_bend(m, 90)
@@ -519,3 +520,18 @@ def test_embedded_bad_init_is_one_line_error():
         with pytest.raises(InputError, match=r"^init: expected finite positions") as e:
             d.solve(m.vertices[[0, 1]], init=bad)
         assert "\n" not in str(e.value)
+
+
+def test_registry_capabilities_of_local_global_methods_are_their_energies():
+    """Descent, acceleration and the rigidity map of a local/global method are facts of its
+    energy: the registry takes them from the energy's registration."""
+    from arapkit.arap.energies import energy_info, energy_names
+    from arapkit.methods.registry import methods
+
+    lg = [m for m in methods() if m.local_global]
+    assert {m.name for m in lg} == set(energy_names())
+    for m in lg:
+        en = energy_info(m.name)
+        assert m.descent == en.descent and m.accelerate == en.descent
+        assert m.rigidity_map == en.rigidity_map
+    assert not energy_info("sr-arap").descent  # the Jacobi coupling can raise the energy

@@ -1,4 +1,4 @@
-"""Bounding box, up-axis guess and named camera views (arapkit.orientation)."""
+"""Bounding box, up-axis guess and named camera views (arapkit.mesh.orientation)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from conftest import data_path
 
 from arapkit import load_mesh
 from arapkit.errors import InputError
-from arapkit.orientation import VIEWS, bounding_box, guess_up, parse_axis, view_frame
+from arapkit.mesh.orientation import VIEWS, bounding_box, guess_up, parse_axis, view_frame
 
 #: Up axes read off axis-aligned renders of each model (a person looked at them); the
 #: guess must agree. Models with no true up (knot, fist, half-cylinder, flat patch) are

@@ -1,8 +1,12 @@
-"""Headless figures (arapkit.plots)."""
+"""Headless figures (arapkit.plots.figures and its renderer, arapkit.plots.render)."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import matplotlib.image as mpimg
 import matplotlib.pyplot as plt
@@ -10,9 +14,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from arapkit.colors import ENERGY_CMAP, RING_COLORS
 from arapkit.errors import InputError
-from arapkit.plots import (
+from arapkit.plots.colors import ENERGY_CMAP, RING_COLORS
+from arapkit.plots.figures import (
     cluster_simplify,
     deformation_figure,
     energy_curves_figure,
@@ -23,6 +27,7 @@ from arapkit.plots import (
     series_figure,
     view_basis,
 )
+from arapkit.plots.render import MOVED_COLOR, mark, new_figure
 
 
 def _image(path):
@@ -174,7 +179,14 @@ def test_series_figure_shared_norm(tmp_path, sphere):
 
 
 def test_save_figure_rejects_unknown_format(tmp_path):
+    open_before = plt.get_fignums()
     fig = energy_curves_figure({"a": [1.0]})
+    with pytest.raises(InputError, match=r"fig.xyz: unsupported figure format"):
+        save_figure(fig, tmp_path / "fig.xyz")
+    # arapkit's figures are never pyplot's: nothing is left open in pyplot
+    assert plt.get_fignums() == open_before
+    # a figure the caller made with pyplot is closed, also on an error
+    fig, _ = plt.subplots()
     with pytest.raises(InputError, match=r"fig.xyz: unsupported figure format"):
         save_figure(fig, tmp_path / "fig.xyz")
     assert not plt.fignum_exists(fig.number)
@@ -197,3 +209,43 @@ def test_handles_are_painted_on_the_rest_panel(tmp_path, sphere):
     red = (r > 0.3) & (r > 2.5 * g) & (r > 2.5 * b)
     blue = (b > 0.15) & (b > 1.6 * r) & (b > 1.6 * g)
     assert red.sum() > 50 and blue.sum() > 50
+
+
+def test_figures_leave_matplotlibs_backend_and_pyplot_alone(tmp_path):
+    # a notebook's or an application's backend must survive importing and using the figures:
+    # run in a fresh interpreter whose backend is not Agg, and draw and save every kind
+    code = """
+import sys, matplotlib
+before = matplotlib.get_backend()
+import numpy as np
+from arapkit.plots import figures, render
+from arapkit.mesh.shapes import bar
+m = bar()
+V, F = m.vertices, m.faces
+fig = figures.deformation_figure(V, F, V * 1.1, np.ones(len(V)), np.array([0, 1]), [2.0, 1.0],
+                                 rings=np.where(V[:, 0] > 0, 2, 6))
+figures.save_figure(fig, sys.argv[1])
+figures.save_figure(figures.groups_figure(V, F, [("a", [0, 1])]), sys.argv[1])
+print(before, matplotlib.get_backend(), "matplotlib.pyplot" in sys.modules)
+"""
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    env = {**os.environ, "MPLBACKEND": "svg",
+           "PYTHONPATH": os.pathsep.join(p for p in (src, os.environ.get("PYTHONPATH")) if p)}
+    out = tmp_path / "f.png"
+    proc = subprocess.run([sys.executable, "-c", code, str(out)], capture_output=True, text=True,
+                          env=env, timeout=600)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.split() == ["svg", "svg", "False"]
+    _assert_not_blank(out)
+
+
+def test_renderer_draws_outside_pyplot(tmp_path):
+    open_before = plt.get_fignums()
+    fig = new_figure(figsize=(3, 3), dpi=60)
+    ax = fig.subplots()
+    V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    render_mesh(ax, V, np.array([[0, 1, 2]]), basis=np.eye(3))
+    mark(ax, V[:1], np.eye(3), MOVED_COLOR, "moved")
+    save_figure(fig, tmp_path / "t.png")
+    _assert_not_blank(tmp_path / "t.png")
+    assert plt.get_fignums() == open_before

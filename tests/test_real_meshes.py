@@ -20,8 +20,8 @@ from conftest import data_path
 
 from arapkit import Deformer, InputError, load_mesh
 from arapkit.cli import main
-from arapkit.handles import load_handles
-from arapkit.weights import DEFAULT_WEIGHTS, edge_weights
+from arapkit.io import load_handles
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, edge_weights
 
 HANDLES = Path(__file__).resolve().parent / "data" / "real_handles"
 SMALL = ["cow.off", "hand.off", "elephant.off", "homer.off", "knot1.off", "plane.off",

@@ -14,7 +14,7 @@ import numba as nb
 import numpy as np
 import pytest
 
-from arapkit.rotations import fit_rotations, rotation_from_covariance
+from arapkit.arap.rotations import fit_rotations, rotation_from_covariance
 
 ORTH_TOL = 1e-12
 TRACE_TOL = 1e-10

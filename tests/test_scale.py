@@ -35,13 +35,13 @@ def test_compact_structures(big_mesh):
     m = big_mesh
     h, _ = drag(m)
     d = Deformer(m, h, rings=3)
-    nb = d._nb
+    nb = d.problem.energy.nbh
     assert nb.disk_idx.dtype == np.int32 and nb.edge_idx.dtype == np.int32
     assert nb.edge_layer.dtype == np.int8 and nb.disk_coef.dtype == np.float64
-    assert nb.vdisk_k is None and nb.vdisk_coef is None  # the solver scatters instead
+    assert not hasattr(nb, "vdisk_coef")  # no copy grouped by vertex: the solver scatters
     # the per-thread scatter windows stay within a small multiple of n (the vertex order
     # keeps each chunk's neighbourhoods together)
-    assert len(d._buf) <= 3 * m.n_vertices
+    assert len(d.backend.buf) <= 3 * m.n_vertices
     per_vertex = (nb.disk_idx.nbytes + nb.disk_coef.nbytes + nb.edge_idx.nbytes
                   + nb.edge_layer.nbytes) / m.n_vertices
     assert per_vertex < 2000  # bytes per vertex at r = 3 (~1.5 kB)
@@ -54,7 +54,7 @@ def test_scrambled_order_keeps_windows_bounded(big_mesh):
     ms = Mesh(m.vertices[p], inv[m.faces], name="scrambled")
     h, _ = drag(ms)
     d = Deformer(ms, h, rings=2, reorder=False)  # worst case: no reordering
-    assert len(d._buf) <= max(3, d._chunk_ptr.size) * ms.n_vertices
+    assert len(d.backend.buf) <= max(3, d.backend.chunk_ptr.size) * ms.n_vertices
 
 
 def test_larger_mesh_monotone_and_accelerated(big_mesh):

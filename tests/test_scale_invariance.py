@@ -14,8 +14,8 @@ import pytest
 
 from arapkit import Deformer, Mesh
 from arapkit.errors import InputError
-from arapkit.shapes import bar, bar_bend
-from arapkit.weights import edge_weights
+from arapkit.mesh.shapes import bar, bar_bend
+from arapkit.mesh.weights import edge_weights
 
 SCALES = [
     1e-150, 1e-100, 2.0**-400, 1e-50, 1e-10, 1.0, 1e10, 1e50, 1e100, 1e150, 2.0**-250, 2.0**400,

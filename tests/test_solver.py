@@ -7,8 +7,8 @@ import pytest
 from conftest import data_path, independent_ring_edges
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.shapes import bar, bar_bend, bar_two_materials
-from arapkit.weights import edge_weights
+from arapkit.mesh.shapes import bar, bar_bend, bar_two_materials
+from arapkit.mesh.weights import edge_weights
 
 
 def brute_energy(mesh, w, rings, P, R):
@@ -255,7 +255,7 @@ def test_obtuse_real_mesh_factorises_and_clamp_keeps_rest():
 def test_indefinite_system_names_remedy():
     import scipy.sparse as sp
 
-    from arapkit.solver import CholeskyFactor
+    from arapkit.methods.deformer import CholeskyFactor
 
     with pytest.raises(InputError, match="not positive definite.*cotan-clamped"):
         CholeskyFactor(sp.csr_matrix(np.array([[1.0, 2.0], [2.0, 1.0]])), "m.off",

@@ -10,12 +10,12 @@ import pytest
 torch = pytest.importorskip("torch", reason="PyTorch not installed (pip install 'arapkit[torch]')")
 
 from arapkit import Deformer  # noqa: E402
-from arapkit.backend import CPUBackend  # noqa: E402
+from arapkit.arap.backends.cpu import CPUBackend  # noqa: E402
+from arapkit.arap.backends.torch_backend import fit_rotations  # noqa: E402
+from arapkit.arap.problem import ARAPProblem  # noqa: E402
 from arapkit.errors import InputError  # noqa: E402
-from arapkit.problem import ARAPProblem  # noqa: E402
-from arapkit.shapes import bar, bar_bend  # noqa: E402
+from arapkit.mesh.shapes import bar, bar_bend  # noqa: E402
 from arapkit.torch import ARAPLayer, arap_energy  # noqa: E402
-from arapkit.torch_backend import fit_rotations  # noqa: E402
 
 F64 = torch.float64
 
@@ -65,7 +65,7 @@ def _cactus_poses():
     from pathlib import Path
 
     from arapkit import load_mesh
-    from arapkit.handles import parse_handles
+    from arapkit.io import parse_handles
 
     examples = Path(__file__).resolve().parents[1] / "examples"
     mesh = load_mesh(examples / "cactus.off")
@@ -221,7 +221,8 @@ def test_arap_energy_value_and_gradient(small, rings):
                                 {"energy": "sr-arap"}])
 def test_deformer_torch_backend_equals_numba(kw):
     if kw.get("energy") == "sr-arap":  # a rotation coupling, where the energy module exists
-        pytest.importorskip("arapkit.sr_arap", reason="energy 'sr-arap' not in this build")
+        pytest.importorskip("arapkit.arap.energies.sr_arap",
+                            reason="energy 'sr-arap' not in this build")
     mesh = bar(segments=(20, 3, 3))
     h, t = bar_bend(mesh, 90)
     ref = Deformer(mesh, h, **kw).solve(t, max_iter=50)
@@ -265,7 +266,7 @@ def test_bad_inputs_are_one_line_errors(small):
 
 def test_cpu_rotation_kernel_equals_the_cuda_path():
     """On CPU the forward uses the numba kernel; CUDA runs the batched SVD: same rotations."""
-    from arapkit.torch_backend import _svd_rotation, best_rotations
+    from arapkit.arap.backends.torch_backend import _svd_rotation, best_rotations
 
     rng = np.random.default_rng(3)
     S = torch.tensor(rng.standard_normal((500, 3, 3)))

@@ -1,4 +1,5 @@
-"""Volumetric r-ring ARAP (arapkit.volume): exactness, rigidity, volume, refusals, output."""
+"""Volumetric r-ring ARAP (arapkit.methods.volumetric): exactness, rigidity, volume, refusals,
+output."""
 
 from __future__ import annotations
 
@@ -12,8 +13,9 @@ from tet_arap_oracle import libigl_tet_arap
 
 from arapkit import Deformer, Mesh
 from arapkit.errors import InputError
-from arapkit.shapes import bar, bar_bend
-from arapkit.volume import (
+from arapkit.mesh.shapes import bar, bar_bend
+from arapkit.mesh.weights import edge_weights
+from arapkit.methods.volumetric import (
     VOLUME_WEIGHTS,
     VolumetricDeformer,
     check_closed,
@@ -27,7 +29,6 @@ from arapkit.volume import (
     tetrahedralise,
     volume_graph,
 )
-from arapkit.weights import edge_weights
 
 needs_mesher = pytest.mark.skipif(
     not have_mesher(),
@@ -60,7 +61,7 @@ CONVERGED = {"tol": 1e-5, "max_iter": 20000}
 
 def _case(mesh_path: Path, handle_file):
     from arapkit import load_mesh
-    from arapkit.handles import load_handles
+    from arapkit.io import load_handles
 
     m = load_mesh(mesh_path)
     # a file name in benchmarks/volume/, or an absolute path (pathlib keeps it as is)
@@ -329,7 +330,7 @@ def test_open_real_mesh_is_refused(data_dir):
 
 
 def _bar_files(tmp_path: Path) -> tuple[Path, Path]:
-    from arapkit.fileio import save_mesh
+    from arapkit.io import save_mesh
 
     m = bar(5.0, 1.0, 1.0, (20, 4, 4))
     mesh = tmp_path / "thick.off"
@@ -371,10 +372,10 @@ def test_cli_volumetric_writes_the_surface_and_the_volume(tmp_path, capsys):
 
 
 def test_cli_volumetric_without_mesher_says_how_to_install(tmp_path, capsys, monkeypatch):
-    from arapkit import volume
     from arapkit.cli import main
+    from arapkit.methods.volumetric import mesher
 
-    monkeypatch.setattr(volume, "_ftetwild", lambda: None)
+    monkeypatch.setattr(mesher, "find_mesher", lambda: None)
     mesh, handles = _bar_files(tmp_path)
     rc = main(["deform", str(mesh), "--handles", str(handles), "--volumetric",
                "-o", str(tmp_path / "out.off")])
@@ -397,11 +398,11 @@ def test_cli_volumetric_refuses_an_open_mesh(tmp_path, capsys, data_dir):
 
 @needs_mesher
 def test_a_failing_mesher_is_a_clean_error(tmp_path, monkeypatch):
-    from arapkit import volume
+    from arapkit.methods.volumetric import mesher
 
     bogus = tmp_path / "PyfTetWildWrapper.so"
     bogus.write_bytes(b"not a library")
-    monkeypatch.setattr(volume, "_ftetwild", lambda: str(bogus))
+    monkeypatch.setattr(mesher, "find_mesher", lambda: str(bogus))
     with pytest.raises(InputError, match=r"bar: the tetrahedral mesher \(fTetWild\) failed"):
         tetrahedralise(bar(5.0, 1.0, 1.0, (10, 2, 2)))
 

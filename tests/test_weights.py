@@ -7,8 +7,8 @@ import pytest
 from conftest import data_path
 
 from arapkit import InputError, Mesh, load_mesh
-from arapkit.shapes import bar
-from arapkit.weights import edge_weights, voronoi_areas
+from arapkit.mesh.shapes import bar
+from arapkit.mesh.weights import edge_weights, voronoi_areas
 
 igl = pytest.importorskip("igl", reason="libigl is the test oracle for weights")
 

@@ -13,9 +13,8 @@ import pytest
 from conftest import data_path
 
 from arapkit import Deformer, InputError, Mesh, load_mesh
-from arapkit.fileio import read_ply_vertex_properties, save_mesh
-from arapkit.mesh import weld
-from arapkit.welding import soup_facts, to_source, weld_handles, weld_values
+from arapkit.io import read_ply_vertex_properties, save_mesh
+from arapkit.mesh.welding import soup_facts, to_source, weld, weld_handles, weld_values
 
 
 def arapkit(*args) -> subprocess.CompletedProcess:
@@ -180,7 +179,7 @@ def test_weld_option_value_checked(tmp_path):
 
 def test_learn_with_weld_writes_the_input_vertices(tmp_path):
     """learn on two soups with --weld equals learn on the welded meshes, per soup vertex."""
-    from arapkit.shapes import bar
+    from arapkit.mesh.shapes import bar
 
     mesh = bar(segments=(20, 2, 2))
     # a hinge: the far half turned by 30 degrees about the middle (soft joint, rigid rest)
@@ -290,7 +289,7 @@ def test_geometric_selectors_act_on_the_welded_mesh(tmp_path):
 
 def test_welded_handle_resolution_by_hand():
     """Selections on the welded square (4 positions), vertex numbers on the soup (6)."""
-    from arapkit.handles import parse_handles
+    from arapkit.io import parse_handles
 
     soup = square_soup()
     w = weld(soup)
@@ -323,7 +322,7 @@ def test_editor_and_batch_jobs_select_on_the_welded_mesh(tmp_path):
     import argparse
 
     from arapkit.cli.edit import build_state
-    from arapkit.jobs import DeformJob, load_job_inputs
+    from arapkit.workflows.jobs import DeformJob, load_job_inputs
 
     soup = square_soup()
     path = tmp_path / "sq.off"

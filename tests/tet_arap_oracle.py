@@ -10,11 +10,12 @@ import numpy as np
 
 
 def libigl_tet_arap(tm, handles, targets, iterations: int) -> np.ndarray:
-    """libigl's ARAP on the tets of ``tm`` (an ``arapkit.volume.TetMesh``); surface rows.
+    """libigl's ARAP on the tets of ``tm`` (an ``arapkit.methods.volumetric.TetMesh``); surface
+    rows.
 
     Examples
     --------
-    >>> from arapkit.volume import TetMesh
+    >>> from arapkit.methods.volumetric import TetMesh
     >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0]])
     >>> tm = TetMesh(V, np.array([[0, 1, 2, 3]]), 4)
     >>> U = libigl_tet_arap(tm, np.array([0, 1, 2]), V[:3] + 1.0, 100)

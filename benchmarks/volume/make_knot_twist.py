@@ -24,7 +24,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import dijkstra
 
 from arapkit import load_mesh
-from arapkit.handles import select_sphere
+from arapkit.io import select_sphere
 
 HERE = Path(__file__).resolve().parent
 MESH = HERE.parents[2] / "shared" / "data" / "meshes" / "knot1.off"

@@ -6,7 +6,7 @@ as its r = 1 case, and Laplacian surface editing.
 Examples
 --------
 >>> import arapkit
->>> from arapkit.shapes import bar, bar_bend
+>>> from arapkit.mesh.shapes import bar, bar_bend
 >>> mesh = bar()
 >>> handles, targets = bar_bend(mesh, 180)
 >>> res = arapkit.Deformer(mesh, handles, rings=3).solve(targets)
@@ -22,31 +22,46 @@ import os as _os
 # starts its OpenMP pool (at the first parallel call); an explicit user setting wins.
 _os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
+from . import _compat  # noqa: E402
 from .errors import InputError  # noqa: E402
-from .fileio import save_mesh
-from .handles import (
+from .io import (
     HandleGroup,
     HandleSet,
     load_handles,
+    load_mesh,
     load_rings,
     parse_handles,
     save_def,
     save_handles,
+    save_mesh,
     save_rings,
     save_sel,
     select_box,
     select_nearest,
     select_sphere,
 )
-from .laplacian import LaplacianEditor, laplacian_edit
-from .learn import LearnedRings, learn_rings
-from .mesh import Mesh, load_mesh
-from .orientation import BoundingBox, UpGuess, bounding_box, guess_up
-from .solver import Deformer, Result
+from .learn.fit import LearnedRings, learn_rings
+from .mesh.model import Mesh
+from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
+from .methods.deformer import Deformer, Result
+from .methods.laplacian import LaplacianEditor, laplacian_edit
 
-__version__ = "0.1.0"
 
-# the public names: classes, then functions (submodules such as arapkit.plots are public too)
+def _installed_version() -> str:
+    # the one source is pyproject.toml, read back from the installed package's metadata
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return version("arapkit")
+    except PackageNotFoundError:  # a source tree that was never installed
+        return "0+unknown"
+
+
+__version__ = _installed_version()
+del _installed_version
+
+# the public names: classes, then functions (submodules such as arapkit.plots.figures are public
+# too)
 __all__ = [
     "BoundingBox",
     "Deformer",
@@ -77,3 +92,10 @@ __all__ = [
     "select_sphere",
 ]
 del _os  # only needed above; keeps arapkit.os / arapkit._os out of the namespace
+
+_compat.install()
+
+
+def __getattr__(name: str):
+    # ``arapkit.methods.deformer`` after a plain ``import arapkit``: old flat paths, for one release
+    return _compat.old_module(name)

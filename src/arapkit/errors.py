@@ -4,9 +4,14 @@ Every message is one line that names the file, vertex, handle or group at fault,
 so the command line can print it as is and exit with status 2. A message that tells the
 user to change an option is an :class:`Advice`: Python code reads ``weights='cotan'``,
 the command line ``--weights cotan`` and the editor its Solver panel.
+:func:`require_extra` is the one door check for the optional extras (figures, editor ...).
 """
 
 from __future__ import annotations
+
+import importlib
+from collections.abc import Sequence
+from types import ModuleType
 
 
 class InputError(ValueError):
@@ -95,3 +100,56 @@ def worded_for(message: object, interface: str) -> str:
     'plain text'
     """
     return message.worded_for(interface) if isinstance(message, Advice) else str(message)
+
+
+class MissingExtraError(InputError, ImportError):
+    """An optional extra that a command or module needs is not installed.
+
+    An :class:`InputError`, so the command line prints its one line and exits with 2, and an
+    :class:`ImportError`, so code that guards an optional import catches it as usual.
+
+    Examples
+    --------
+    >>> isinstance(MissingExtraError("x"), (InputError, ImportError))
+    True
+    """
+
+
+def require_extra(modules: str | Sequence[str], extra: str, what: str) -> list[ModuleType]:
+    """Import ``modules``, or say in one line which extra of arapkit provides them.
+
+    Parameters
+    ----------
+    modules : name or names of the modules the extra installs (e.g. ``"viser"``).
+    extra : the extra's name in ``pip install 'arapkit[extra]'``.
+    what : the command or module that needs it, as the user called it.
+
+    Returns
+    -------
+    The imported modules, in order.
+
+    Raises
+    ------
+    MissingExtraError
+        ``"<what> needs the <extra> extra: pip install 'arapkit[<extra>]'"``.
+
+    Examples
+    --------
+    >>> [m.__name__ for m in require_extra("json", "editor", "arapkit edit")]
+    ['json']
+    >>> require_extra("no_such_module_here", "plots", "--figure")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.MissingExtraError: --figure needs the plots extra: pip install 'arapkit[plots]'
+    """
+    names = [modules] if isinstance(modules, str) else list(modules)
+    try:
+        return [importlib.import_module(name) for name in names]
+    except ImportError as e:
+        # only the module itself missing is the extra's absence; a broken install's own
+        # ImportError (a missing shared library ...) is another problem and is shown as is
+        if e.name is None or e.name.split(".")[0] not in {n.split(".")[0] for n in names}:
+            raise
+        raise MissingExtraError(
+            f"{what} needs the {extra} extra: pip install 'arapkit[{extra}]'"
+        ) from e

@@ -21,18 +21,19 @@ from __future__ import annotations
 import weakref
 
 import torch as _torch
-from numpy.linalg import norm as np_norm
 
-from arapkit.errors import InputError
-from arapkit.problem import ARAPProblem
-from arapkit.torch_backend import (
+from .arap.backends.torch_backend import (
     TorchSystem,
     _pose_sums,
     best_rotations,
     check_dtype,
     fit_rotations,
 )
-from arapkit.weights import DEFAULT_WEIGHTS
+from .arap.problem import ARAPProblem
+from .errors import InputError
+from .mesh.model import bounding_box_diagonal
+from .mesh.weights import DEFAULT_WEIGHTS
+from .validate import iteration_cap, tolerance
 
 __all__ = ["ARAPLayer", "arap_energy"]
 
@@ -73,7 +74,7 @@ def _bdot(a: _torch.Tensor, b: _torch.Tensor) -> _torch.Tensor:
 class _ARAPSolve(_torch.autograd.Function):
     """Local/global solve with implicit differentiation at the converged solution.
 
-    Forward: the loop of :func:`arapkit.loop.local_global` in torch ops, batched.
+    Forward: the loop of :func:`arapkit.arap.loop.local_global` in torch ops, batched.
 
     Backward: the converged free positions ``x`` satisfy ``grad_x f(x, T) = 0`` for the
     reduced energy ``f(x, T) = min_R E``, i.e. ``A x = b(x, T) - A_fc C(T)`` with
@@ -84,7 +85,7 @@ class _ARAPSolve(_torch.autograd.Function):
     (positive definite at a strict minimum): ``mu`` comes from conjugate gradients
     preconditioned by the Cholesky factor of ``A``, so each CG step costs one solve with
     the forward's factor and one vector-Jacobian product of ``b`` (through the closed-form
-    rotation derivative of :func:`arapkit.torch_backend.fit_rotations`).
+    rotation derivative of :func:`arapkit.arap.backends.torch_backend.fit_rotations`).
     """
 
     @staticmethod
@@ -156,24 +157,18 @@ def _pcg(apply_H, precond, g: _torch.Tensor, tol: float, max_iter: int):
     return mu, it
 
 
-#: why a method of :data:`arapkit.energy.ENERGIES` is not offered by the layer
-_NOT_IN_LAYER = {
-    "sr-arap": "its rotation coupling has no per-step fixed point",
-    "embedded": "it is not a local/global energy",
-}
-
-
 def _check_layer_energy(energy: str) -> None:
-    """Refuse, in one line, a method the layer does not offer (see ``CAPABILITIES``)."""
-    from arapkit.energy import ENERGIES, offered_by
+    """Refuse, in one line, a method the layer does not offer (the registry's "torch" door)."""
+    from .methods.registry import method, method_names
 
-    if energy not in ENERGIES:
-        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(ENERGIES)})")
-    offered = offered_by("torch")
-    if energy not in offered:
-        why = _NOT_IN_LAYER.get(energy, "it is not offered by the layer")
+    if energy not in method_names():
+        known = method_names("library")
+        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(known)})")
+    info = method(energy)
+    if "torch" not in info.interfaces:
+        why = info.why_not.get("torch", "it is not offered by the layer")
         raise InputError(f"energy '{energy}' is not available in ARAPLayer ({why}); use "
-                         f"{' or '.join(repr(e) for e in offered)}")
+                         f"{' or '.join(repr(e) for e in method_names('torch'))}")
 
 
 class ARAPLayer(_torch.nn.Module):
@@ -187,7 +182,7 @@ class ARAPLayer(_torch.nn.Module):
     rings : int or (n,) int
         r per vertex (rigidity), held fixed.
     weights : str
-        Edge weighting (default :data:`arapkit.weights.DEFAULT_WEIGHTS`).
+        Edge weighting (default :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`).
     energy : {"rring", "spokes-and-rims"}
         The local/global energy (SR-ARAP's rotation coupling has no fixed point of one
         step alone and is not offered here).
@@ -212,7 +207,7 @@ class ARAPLayer(_torch.nn.Module):
     Examples
     --------
     >>> import torch
-    >>> from arapkit.shapes import bar, bar_bend
+    >>> from arapkit.mesh.shapes import bar, bar_bend
     >>> mesh = bar(segments=(10, 2, 2))
     >>> h, t = bar_bend(mesh, 45)
     >>> layer = ARAPLayer(mesh, h, dtype=torch.float64)
@@ -236,13 +231,10 @@ class ARAPLayer(_torch.nn.Module):
         problem = ARAPProblem.from_mesh(mesh, handles, energy, weights, rings=rings)
         self.problem = problem
         self.system = TorchSystem(problem, device, dtype).bind(problem)
-        self.tol = float(tol)
-        self.max_iter = int(max_iter)
+        self.tol = tolerance(tol)
+        self.max_iter = iteration_cap(max_iter)
         V = problem.vertices
-        self._step_tol = None if xtol is None else float(xtol) * float(
-            np_norm(V.max(axis=0) - V.min(axis=0)))
-        if self.max_iter < 1:
-            raise InputError(f"max_iter must be >= 1, got {max_iter}")
+        self._step_tol = None if xtol is None else float(xtol) * bounding_box_diagonal(V)
         self.adjoint_tol = (1e-10 if dtype == _torch.float64 else 1e-5) \
             if adjoint_tol is None else float(adjoint_tol)
         self.adjoint_max_iter = int(adjoint_max_iter)
@@ -312,7 +304,7 @@ class ARAPLayer(_torch.nn.Module):
 
     def _passed(self, E: _torch.Tensor, E_prev: _torch.Tensor | None, step: _torch.Tensor,
                 it: int, floor: float) -> _torch.Tensor:
-        """Per pose: the stopping test of :func:`arapkit.loop.local_global` (relative
+        """Per pose: the stopping test of :func:`arapkit.arap.loop.local_global` (relative
         energy decrease below ``tol``, or an energy at round-off level), or ``xtol``."""
         passed = E.abs() <= floor
         if E_prev is not None:
@@ -368,7 +360,7 @@ def arap_energy(X: _torch.Tensor, layer_or_problem: ARAPLayer | ARAPProblem) -> 
     ----------
     X : (n, 3) or (B, n, 3) tensor
         Positions in the mesh's vertex order (float32 or float64, any device).
-    layer_or_problem : ARAPLayer or arapkit.problem.ARAPProblem
+    layer_or_problem : ARAPLayer or arapkit.arap.problem.ARAPProblem
         Gives the rest shape, weights, neighbourhoods (r) and energy; handles play no role.
 
     Returns
@@ -378,8 +370,8 @@ def arap_energy(X: _torch.Tensor, layer_or_problem: ARAPLayer | ARAPProblem) -> 
     Examples
     --------
     >>> import torch
-    >>> from arapkit.shapes import bar
-    >>> from arapkit.problem import ARAPProblem
+    >>> from arapkit.mesh.shapes import bar
+    >>> from arapkit.arap.problem import ARAPProblem
     >>> mesh = bar(segments=(10, 2, 2))
     >>> p = ARAPProblem.from_mesh(mesh, [0], rings=2)
     >>> X = torch.tensor(mesh.vertices, requires_grad=True)

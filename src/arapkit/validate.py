@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from arapkit.errors import InputError
+from .errors import InputError
 
 __all__ = [
     "INPUT_CAP_VARIABLE",

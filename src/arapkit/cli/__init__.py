@@ -23,7 +23,9 @@ import sys
 import traceback
 from collections.abc import Sequence
 
-from arapkit.errors import InputError, worded_for
+from arapkit import __version__
+from arapkit.errors import InputError
+from arapkit.workflows.jobs import error_message
 
 __all__ = ["COMMANDS", "build_parser", "main"]
 
@@ -45,15 +47,6 @@ _EPILOG = """examples (from a clone of the repository, which ships examples/):
   arapkit deform examples/cactus.off -H examples/cactus.json -r 4 -o bent.ply --figure bent.png
   arapkit deform examples/bar.off --handles examples/bar.sel --transform examples/bar.def -o out.off
 """
-
-
-def _version() -> str:
-    try:
-        from importlib.metadata import version
-
-        return version("arapkit")
-    except Exception:  # not installed (running from a source tree)
-        return "unknown"
 
 
 class _Parser(argparse.ArgumentParser):
@@ -80,7 +73,7 @@ def build_parser() -> argparse.ArgumentParser:
         epilog=_EPILOG,
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
-    parser.add_argument("--version", action="version", version=f"arapkit {_version()}")
+    parser.add_argument("--version", action="version", version=f"arapkit {__version__}")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     for name, module in COMMANDS:
         mod = importlib.import_module(module)
@@ -121,14 +114,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 2
     try:
         return int(args._run(args) or 0)
-    except InputError as e:
-        return _fail(worded_for(e.args[0] if e.args else e, "cli"), 2)
-    except FileNotFoundError as e:
-        return _fail(f"{e.filename}: file not found", 2)
-    except IsADirectoryError as e:
-        return _fail(f"{e.filename}: is a folder, expected a file", 2)
-    except PermissionError as e:
-        return _fail(f"{e.filename}: permission denied", 2)
+    except (InputError, FileNotFoundError, IsADirectoryError, PermissionError) as e:
+        return _fail(error_message(e), 2)
     except KeyboardInterrupt:
         print("arapkit: interrupted", file=sys.stderr)
         return 130
@@ -140,4 +127,4 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 0
     except Exception as e:
         traceback.print_exc()
-        return _fail(f"internal error ({type(e).__name__}: {e}); please report this", 1)
+        return _fail(error_message(e), 1)

@@ -67,14 +67,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def _jobs(args: argparse.Namespace):
     """The job file to run: the one given, or the one --augment writes into OUTDIR."""
-    from arapkit.batch import augment_jobs, write_jobs
+    from arapkit.workflows.batch import augment_jobs, write_jobs
 
     if args.augment is None:
         if len(args.inputs) != 1:
             raise InputError(f"give one job file (got {len(args.inputs)}); meshes are inputs "
                              "only with --augment N")
         return args.inputs[0]
-    from arapkit.cli.learn import expand_frames
+    from arapkit.workflows.learning import expand_frames
 
     meshes = expand_frames(args.inputs)
     bad = [m for m in meshes if m.lower().endswith((".jsonl", ".json", ".npz"))]
@@ -94,7 +94,7 @@ def _jobs(args: argparse.Namespace):
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit batch``; returns 0 (all ok or skipped) or 3 (some failed)."""
-    from arapkit import batch
+    from arapkit.workflows import batch
 
     if args.dry_run:
         for line in batch.dry_run(_jobs(args)):

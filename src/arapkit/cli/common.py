@@ -11,14 +11,12 @@ from typing import Any
 
 from arapkit import validate
 from arapkit.errors import InputError
-from arapkit.rings import rings_summary  # noqa: F401 - re-exported for the commands
 
 __all__ = [
     "Progress",
     "add_weld_option",
     "add_view_options",
     "iteration_cap",
-    "load_mesh_checked",
     "maybe_weld",
     "note",
     "port",
@@ -67,7 +65,8 @@ def add_view_options(parser: argparse.ArgumentParser) -> None:
     """Add ``--view`` and ``--up`` to a command that draws figures.
 
     Read them back with ``view=args.view, up=args.up`` for the functions of
-    :mod:`arapkit.plots` (``up`` None means the guess of :func:`arapkit.orientation.guess_up`).
+    :mod:`arapkit.plots.figures` (``up`` None means the guess of
+    :func:`arapkit.mesh.orientation.guess_up`).
 
     Examples
     --------
@@ -75,7 +74,7 @@ def add_view_options(parser: argparse.ArgumentParser) -> None:
     >>> a = p.parse_args(["--view", "iso", "--up=-y"]); a.view, a.up
     ('iso', '-y')
     """
-    from arapkit.orientation import AXES, VIEWS
+    from arapkit.mesh.orientation import AXES, VIEWS
 
     def axis(text: str) -> str:
         t = text.strip().lower()
@@ -101,14 +100,6 @@ def add_view_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
-def load_mesh_checked(path: str):
-    """:func:`arapkit.load_mesh` (kept for callers of this name: it now refuses every bad
-    file with an :class:`InputError` itself)."""
-    from arapkit import load_mesh
-
-    return load_mesh(path)
-
-
 def weld_tolerance(text: str) -> float:
     """argparse type: a finite number >= 0 (the weld distance relative to the diagonal).
 
@@ -127,8 +118,9 @@ def weld_tolerance(text: str) -> float:
 
 
 def add_weld_option(p: argparse.ArgumentParser) -> None:
-    """``--weld [TOL]``: merge coincident vertices for the solve (see :mod:`arapkit.welding`)."""
-    from arapkit.welding import WELD_TOL
+    """``--weld [TOL]``: merge coincident vertices for the solve (see
+    :mod:`arapkit.mesh.welding`)."""
+    from arapkit.mesh.welding import WELD_TOL
 
     p.add_argument(
         "--weld",
@@ -148,7 +140,7 @@ def maybe_weld(mesh, tol: float | None):
     """``mesh`` welded with ``tol`` (relative), or ``mesh`` itself when ``tol`` is None."""
     if tol is None:
         return mesh
-    from arapkit.welding import weld
+    from arapkit.mesh.welding import weld
 
     return weld(mesh, tol)
 

@@ -24,8 +24,9 @@ from arapkit.cli.common import (
     positive_int,
     warn,
 )
-from arapkit.errors import InputError
-from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.errors import InputError, require_extra
+from arapkit.io.formats import readable_formats
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
 
@@ -44,7 +45,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             "arapkit compare bar.off --handles bar.json --rings-file r.txt -o cmp",
         ]),
     )
-    p.add_argument("mesh", metavar="MESH", help="input mesh (OFF, OBJ, PLY, STL; may be .gz)")
+    p.add_argument("mesh", metavar="MESH", help=f"input mesh ({readable_formats()}; may be .gz)")
     p.add_argument("--handles", "-H", required=True, metavar="FILE",
                    help="handle groups (.json) or a per-vertex status file (.sel)")
     p.add_argument("--transform", "-T", metavar="FILE",
@@ -97,23 +98,24 @@ def _slug(label: str) -> str:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit compare``; returns the exit status."""
-    from arapkit.compare import (
+    require_extra("matplotlib", "plots", "arapkit compare")  # it always draws compare.png
+    from arapkit.io import save_mesh
+    from arapkit.methods.deformer import check_method
+    from arapkit.plots.figures import save_figure
+    from arapkit.workflows.compare import (
         comparison_figure,
         comparison_rows,
         format_rows,
         run_comparison,
         write_csv,
     )
-    from arapkit.fileio import save_mesh
-    from arapkit.jobs import DeformJob, load_job_inputs
-    from arapkit.plots import save_figure
-    from arapkit.solver import check_method
+    from arapkit.workflows.jobs import DeformJob, load_job_inputs
 
     t0 = time.perf_counter()
     check_method("sr-arap", args.sr_alpha)
     check_method("embedded", None, args.nodes)
     if args.volumetric:
-        from arapkit.volume import MESHER_HINT, have_mesher
+        from arapkit.methods.volumetric import MESHER_HINT, have_mesher
 
         if not have_mesher():
             raise InputError(MESHER_HINT)
@@ -128,7 +130,7 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         return _dry_run(args, mesh, hs, out)
     if args.volumetric:
-        from arapkit.volume import check_closed
+        from arapkit.methods.volumetric import check_closed
 
         check_closed(mesh)  # refuse an open surface before any method runs
 
@@ -164,8 +166,8 @@ def run(args: argparse.Namespace) -> int:
 
 def _dry_run(args: argparse.Namespace, mesh, hs, out: Path) -> int:
     """What ``deform --dry-run`` shows, for the comparison's handles; solves nothing."""
-    from arapkit.cli.deform import describe_groups
-    from arapkit.plots import groups_figure, save_figure
+    from arapkit.plots.figures import groups_figure, save_figure
+    from arapkit.workflows.jobs import describe_groups
 
     print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices)")
     print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")

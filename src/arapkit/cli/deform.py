@@ -29,8 +29,9 @@ from arapkit.cli.common import (
     tolerance,
     warn,
 )
-from arapkit.errors import InputError, worded_for
-from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.errors import InputError, require_extra, worded_for
+from arapkit.io.formats import readable_formats
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
 
@@ -56,7 +57,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "stdout; progress and notes go to stderr.",
         **add_example_epilog(EXAMPLES),
     )
-    p.add_argument("mesh", metavar="MESH", help="input mesh (OFF, OBJ, PLY, STL; may be .gz)")
+    p.add_argument("mesh", metavar="MESH", help=f"input mesh ({readable_formats()}; may be .gz)")
     p.add_argument(
         "--handles",
         "-H",
@@ -163,11 +164,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 
 def _check_method(args: argparse.Namespace) -> dict[str, Any]:
     """Fail fast on a bad method or option; the keyword arguments for the Deformer."""
-    from arapkit.energy import CAPABILITIES
-    from arapkit.solver import check_method
+    from arapkit.methods.deformer import check_method
+    from arapkit.methods.registry import method
 
     options = check_method(args.energy, args.sr_alpha, args.nodes)
-    can = CAPABILITIES[args.energy]
+    can = method(args.energy, "cli")
     if not can.rigidity_map and (args.rings_file or args.rings != 1):
         raise InputError(f"--energy {args.energy}: has no rigidity map (drop --rings/--rings-file)")
     if not can.accelerate and args.accelerate:
@@ -177,7 +178,7 @@ def _check_method(args: argparse.Namespace) -> dict[str, Any]:
     return {"energy": args.energy, "sr_alpha": args.sr_alpha, "nodes": args.nodes}
 
 
-# -- volumetric ARAP (arapkit.volume) -------------------------------------------------
+# -- volumetric ARAP (arapkit.methods.volumetric) -------------------------------------------------
 
 
 def _add_volume_options(p: argparse.ArgumentParser) -> None:
@@ -207,8 +208,8 @@ def _add_volume_options(p: argparse.ArgumentParser) -> None:
 
 def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None:
     """Refuse volume options without --volumetric, a missing mesher, a bad volume path."""
-    from arapkit.fileio import check_output_path
-    from arapkit.volume import MESHER_HINT, VOLUME_FORMATS, have_mesher
+    from arapkit.io import check_output_path
+    from arapkit.methods.volumetric import MESHER_HINT, VOLUME_FORMATS, have_mesher
 
     if not args.volumetric:
         for flag, value in (("--interior-density", args.interior_density),
@@ -229,7 +230,7 @@ def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Fail fast, before loading or solving, on any output that cannot be written."""
-    from arapkit.fileio import check_figure_format, check_output_path, mesh_format
+    from arapkit.io import check_figure_format, check_output_path, mesh_format
 
     inputs = [args.mesh, args.handles, args.transform, args.rings_file]
     outs = []
@@ -243,6 +244,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         check_output_path(args.report, inputs, args.force, "report")
         outs.append(Path(args.report).resolve())
     if args.figure:
+        require_extra("matplotlib", "plots", "arapkit deform --figure")
         check_output_path(args.figure, inputs, args.force, "figure")
         check_figure_format(args.figure)
         outs.append(Path(args.figure).resolve())
@@ -256,7 +258,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
 
 def _job(args: argparse.Namespace, method: dict[str, Any]):
     """The library's job description of these arguments."""
-    from arapkit.jobs import DeformJob
+    from arapkit.workflows.jobs import DeformJob
 
     return DeformJob(
         mesh=args.mesh,
@@ -278,8 +280,8 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit deform``; returns the exit status."""
-    from arapkit.fileio import write_json
-    from arapkit.jobs import job_report, load_job_inputs, prepare_job, save_result
+    from arapkit.io import write_json
+    from arapkit.workflows.jobs import job_report, load_job_inputs, prepare_job, save_result
 
     t0 = time.perf_counter()
     method = _check_method(args)
@@ -290,7 +292,7 @@ def run(args: argparse.Namespace) -> int:
         inputs = load_job_inputs(job, note=tell)
         return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings)
     if args.volumetric and args.weights != DEFAULT_WEIGHTS:
-        from arapkit.volume import DEFAULT_VOLUME_WEIGHTS
+        from arapkit.methods.volumetric import DEFAULT_VOLUME_WEIGHTS
 
         note(f"--weights {args.weights} applies to surface ARAP; the volume's edges use "
              f"'{DEFAULT_VOLUME_WEIGHTS}' weights (see docs/volumetric.md)", args.quiet)
@@ -322,7 +324,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report and args.report != "-":
         write_json(args.report, report)
     if args.figure:
-        from arapkit.plots import deformation_figure, save_figure
+        from arapkit.plots.figures import deformation_figure, save_figure
 
         fig = deformation_figure(
             mesh.vertices,
@@ -344,7 +346,7 @@ def run(args: argparse.Namespace) -> int:
     if args.report == "-":
         import json
 
-        from arapkit.fileio import to_jsonable
+        from arapkit.io import to_jsonable
 
         print(json.dumps(to_jsonable(report), indent=2))
     else:
@@ -359,46 +361,22 @@ def _method_options(args: argparse.Namespace) -> dict[str, Any]:
 
 
 def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
-    if args.energy == "rring":
-        return f"r = {_describe_rings(r)}"
+    from arapkit.methods.registry import method
+    from arapkit.workflows.jobs import describe_rings
+
+    info = method(args.energy)
+    if info.rigidity_map:
+        return f"r = {describe_rings(r)}"
     opts = _method_options(args)
-    if args.energy == "sr-arap":
-        return f"SR-ARAP, alpha = {opts['sr_alpha']:g}"
-    if args.energy == "embedded":
-        return f"embedded deformation, {opts['nodes']} nodes"
-    return args.energy
-
-
-def describe_groups(vertices: np.ndarray, hs) -> list[str]:
-    """One line per handle group: name, vertex count, motion (what ``--dry-run`` prints).
-
-    Examples
-    --------
-    >>> from arapkit.handles import parse_handles
-    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
-    >>> hs = parse_handles([{"name": "a", "indices": [0]},
-    ...                     {"name": "b", "indices": [2], "translate": [0, 1, 0]}], V)
-    >>> print(chr(10).join(describe_groups(V, hs)))
-    a: 1 vertex, fixed
-    b: 1 vertex, moved: mean displacement [0, 1, 0], largest 1
-    """
-    lines = []
-    for g in hs.groups:
-        n = len(g.indices)
-        head = f"{g.name}: {n} vertex" if n == 1 else f"{g.name}: {n} vertices"
-        d = np.asarray(g.targets) - vertices[g.indices]
-        if g.kind == "fixed" or not np.any(d):
-            lines.append(f"{head}, fixed")
-            continue
-        mean = ", ".join(f"{x:.4g}" for x in d.mean(axis=0) + 0.0)
-        big = float(np.linalg.norm(d, axis=1).max())
-        lines.append(f"{head}, moved: mean displacement [{mean}], largest {big:.4g}")
-    return lines
+    shown = [o.describe.format(opts[k]) for k, o in info.options.items()
+             if o.describe is not None and k in opts]
+    return ", ".join([info.label, *shown])
 
 
 def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
     """Print what the handle file selects and how it moves it; draw it; solve nothing."""
-    from arapkit.orientation import bounding_box
+    from arapkit.mesh.orientation import bounding_box
+    from arapkit.workflows.jobs import describe_groups, describe_rings
 
     box = bounding_box(mesh.vertices)
     print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices, box min "
@@ -406,10 +384,9 @@ def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
     print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
     for line in describe_groups(mesh.vertices, hs):
         print(f"  {line}")
-    r = np.broadcast_to(np.asarray(rings), (mesh.n_vertices,))
-    print(f"rings: r = {_describe_rings(r)}; dry run: nothing solved, no mesh written")
+    print(f"rings: r = {describe_rings(rings)}; dry run: nothing solved, no mesh written")
     if args.figure:
-        from arapkit.plots import groups_figure, save_figure
+        from arapkit.plots.figures import groups_figure, save_figure
 
         groups = [(g.name, g.indices) for g in hs.groups]
         fig = groups_figure(mesh.vertices, mesh.faces, groups, view=args.view, up=args.up,
@@ -421,11 +398,6 @@ def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
 
 def _vec(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
-
-
-def _describe_rings(r: np.ndarray) -> str:
-    lo, hi = int(r.min()), int(r.max())
-    return str(lo) if lo == hi else f"{lo}..{hi}"
 
 
 def _print_summary(args, mesh, hs, res, wall: float) -> None:

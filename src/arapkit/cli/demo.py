@@ -29,7 +29,7 @@ from arapkit.cli.common import (
     note,
     positive_int,
 )
-from arapkit.errors import InputError
+from arapkit.errors import InputError, require_extra
 
 __all__ = ["PAPER_RINGS", "add_parser", "format_table", "run"]
 
@@ -123,7 +123,7 @@ def _prepare_out(path: str) -> Path:
         out.mkdir(exist_ok=True)
     except OSError as e:
         raise InputError(f"{out}: cannot create the output folder ({e.strerror or e})") from None
-    from arapkit.fileio import check_output_path
+    from arapkit.io import check_output_path
 
     # before any solve: the folder must really take files (read-only or immutable ones don't)
     check_output_path(out / "demo-report.json", what="demo output")
@@ -133,7 +133,7 @@ def _prepare_out(path: str) -> Path:
 def _warm_up() -> None:
     """Run a tiny solve so that JIT compilation is not charged to the r = 1 row."""
     from arapkit import Deformer
-    from arapkit.shapes import bar, bar_bend
+    from arapkit.mesh.shapes import bar, bar_bend
 
     small = bar(length=2.0, segments=(6, 2, 2))
     h, t = bar_bend(small, 30)
@@ -168,9 +168,10 @@ def _row(label: Any, res) -> dict[str, Any]:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit demo``; returns the exit status."""
-    from arapkit import plots
-    from arapkit.fileio import save_mesh, write_json
-    from arapkit.shapes import bar, bar_bend, bar_two_materials
+    require_extra("matplotlib", "plots", "arapkit demo")  # before any solving: it draws figures
+    from arapkit.io import save_mesh, write_json
+    from arapkit.mesh.shapes import bar, bar_bend, bar_two_materials
+    from arapkit.plots import figures as plots
 
     t_start = time.perf_counter()
     out = _prepare_out(args.out)
@@ -231,7 +232,7 @@ def run(args: argparse.Namespace) -> int:
         f"{len(handles)} handles, tol 1e-3 (times after a JIT warm-up)"
     )
     print(format_table(rows))
-    from arapkit.compare import format_rows
+    from arapkit.workflows.compare import format_rows
 
     print("\nMethods on the same bend (own energies are not comparable across methods):")
     print(format_rows(comparison))
@@ -245,7 +246,12 @@ def run(args: argparse.Namespace) -> int:
 def _comparison(out: Path, mesh, handles, targets, soft_hard, plots,
                 camera: dict[str, Any]) -> list[dict[str, Any]]:
     """ARAP, SR-ARAP, embedded deformation, r = 4 and the two-material map on one bend."""
-    from arapkit.compare import comparison_figure, comparison_rows, run_comparison, write_csv
+    from arapkit.workflows.compare import (
+        comparison_figure,
+        comparison_rows,
+        run_comparison,
+        write_csv,
+    )
 
     runs = run_comparison(mesh, handles, targets, rings=4, rings_map=soft_hard,
                           weights=PAPER_WEIGHTS)

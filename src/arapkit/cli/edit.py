@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from arapkit.cli.common import add_example_epilog, port, ring_size, upload_mb
+from arapkit.errors import require_extra
 
 _DESCRIPTION = """\
 Start a local editor in the browser: pick handle regions (click or Shift+drag a rectangle),
@@ -109,7 +110,7 @@ def build_state(args: argparse.Namespace) -> Any:
     from arapkit import load_mesh
     from arapkit.editor.state import EditorState
     from arapkit.errors import InputError
-    from arapkit.handles import load_handles, load_rings
+    from arapkit.io import load_handles, load_rings
     from arapkit.validate import ring_size as ring_size_rule
 
     if args.session:
@@ -125,28 +126,28 @@ def build_state(args: argparse.Namespace) -> Any:
         st = _bar_state()
     ring_size_rule(args.rings, "--rings")
     if not args.session and args.rings != 1:
-        st.rings = st._check_rings(args.rings)
+        st.rings = st.check_rings(args.rings)
     # vertex numbers in files given on the command line are the input's, also when welded
     welded = getattr(st.mesh, "welded_from", None)
     source = welded.source if welded is not None else st.mesh
     if args.rings_file:
         rings = load_rings(args.rings_file, source.n_vertices)
         if welded is not None:
-            from arapkit.welding import weld_values
+            from arapkit.mesh.welding import weld_values
 
             rings = weld_values(st.mesh, rings)
-        st.rings = st._check_rings(rings)
+        st.rings = st.check_rings(rings)
     if args.handles:
         hs = load_handles(args.handles, source.vertices,
                           welded=None if welded is None else st.mesh)
         st.add_handle_set(hs, record=False)
-    st._undo.clear()  # start-up choices are not undoable edits
+    st.clear_history()  # start-up choices are not undoable edits
     return st
 
 
 def _bar_state() -> Any:
     from arapkit.editor.state import EditorState
-    from arapkit.shapes import bar
+    from arapkit.mesh.shapes import bar
 
     mesh = bar()
     st = EditorState(mesh)
@@ -159,7 +160,7 @@ def _bar_state() -> Any:
 
 def _up(text: str | None) -> str | None:
     """``--up`` as the editor spells it ('y' = '+y'), or None to guess."""
-    from arapkit.orientation import parse_axis
+    from arapkit.mesh.orientation import parse_axis
 
     if text is None:
         return None
@@ -170,6 +171,8 @@ def _up(text: str | None) -> str | None:
 
 def run(args: argparse.Namespace) -> int:
     """Start the editor and serve until Ctrl-C."""
+    # the editor serves with viser and colours energy with matplotlib's maps
+    require_extra(("viser", "matplotlib"), "editor", "arapkit edit")
     from arapkit.editor.app import EditorApp
     from arapkit.validate import host
 

@@ -16,7 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from arapkit.cli.common import add_example_epilog, load_mesh_checked
+from arapkit.cli.common import add_example_epilog
+from arapkit.io import load_mesh
+from arapkit.io.formats import readable_formats
 
 __all__ = ["add_parser", "inspect_mesh", "run"]
 
@@ -41,7 +43,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             ["arapkit info examples/cactus.off", "arapkit info scan.ply.gz --json"]
         ),
     )
-    p.add_argument("mesh", metavar="MESH", help="mesh file (OFF, OBJ, PLY, STL; may be .gz)")
+    p.add_argument("mesh", metavar="MESH", help=f"mesh file ({readable_formats()}; may be .gz)")
     p.add_argument("--json", action="store_true", help="print the facts as one JSON object")
     return p
 
@@ -69,16 +71,16 @@ def inspect_mesh(mesh) -> dict[str, Any]:
 
     Examples
     --------
-    >>> from arapkit.shapes import bar
+    >>> from arapkit.mesh.shapes import bar
     >>> facts = inspect_mesh(bar())
     >>> facts["components"], facts["boundary_loops"]
     (1, 0)
     """
     from arapkit.errors import InputError
-    from arapkit.mesh import Mesh, check_number_range, scale_free_vertices
-    from arapkit.orientation import bounding_box, guess_up
-    from arapkit.weights import cotangent_weights
-    from arapkit.welding import soup_facts
+    from arapkit.mesh.model import Mesh, check_number_range, scale_free_vertices
+    from arapkit.mesh.orientation import bounding_box, guess_up
+    from arapkit.mesh.weights import cotangent_weights
+    from arapkit.mesh.welding import soup_facts
 
     box, up = bounding_box(mesh.vertices), guess_up(mesh.vertices)
     loops = mesh.boundary_loops
@@ -173,10 +175,10 @@ def _advice(f: dict[str, Any]) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit info``; returns the exit status."""
-    facts = inspect_mesh(load_mesh_checked(args.mesh))
+    facts = inspect_mesh(load_mesh(args.mesh))
     facts["file"] = args.mesh
     if args.json:
-        from arapkit.fileio import to_jsonable
+        from arapkit.io import to_jsonable
 
         print(json.dumps(to_jsonable(facts), indent=2))
         return 0

@@ -17,7 +17,7 @@ Conventions
 
 Examples
 --------
->>> from arapkit.shapes import bar
+>>> from arapkit.mesh.shapes import bar
 >>> st = EditorState(bar())
 >>> sel = st.select_near(st.vertices[0], radius=0.05)
 >>> h = st.add_handle()
@@ -41,282 +41,26 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
 from arapkit import validate
-from arapkit.energy import offered_by
+from arapkit.editor import session as session_file
+from arapkit.editor.geometry import (  # raycast, quat_to_matrix: kept at their old path
+    CameraView,
+    in_screen_rect,
+    nearest_vertex,
+    quat_to_matrix,
+    raycast,
+    vertex_normals,
+    vertices_within,
+)
+from arapkit.editor.handles import Handle
+from arapkit.editor.session import SESSION_FORMAT, SESSION_VERSION
+from arapkit.editor.settings import METHODS, SolverSettings
 from arapkit.errors import InputError
-from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
-SESSION_FORMAT = "arapkit-editor-session"
-SESSION_VERSION = 1
-#: solver-panel methods: "arap" is r-ring ARAP with the painted map, the others name
-#: :data:`arapkit.energy.ENERGIES` (no rigidity map) or Laplacian editing
-#: (r-ring ARAP is "arap": it takes the painted map)
-METHODS = ("arap", "laplacian", *(e for e in offered_by("editor") if e != "rring"),
-           "volumetric")
+__all__ = ["METHODS", "MAX_UNDO", "SESSION_FORMAT", "SESSION_VERSION", "CameraView",
+           "EditorState", "Handle", "SolverSettings", "quat_to_matrix", "raycast",
+           "vertex_normals"]
+
 MAX_UNDO = 200
-
-
-# --------------------------------------------------------------------------- geometry helpers
-
-
-def quat_to_matrix(wxyz: Sequence[float] | np.ndarray) -> np.ndarray:
-    """Rotation matrix of a (not necessarily unit) quaternion ``(w, x, y, z)``.
-
-    Examples
-    --------
-    >>> np.allclose(quat_to_matrix([1, 0, 0, 0]), np.eye(3))
-    True
-    """
-    w, x, y, z = np.asarray(wxyz, dtype=np.float64) / np.linalg.norm(wxyz)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-
-
-@dataclasses.dataclass(frozen=True)
-class CameraView:
-    """A pinhole camera as the browser reports it (OpenCV axes: +z forward, +y down).
-
-    Parameters
-    ----------
-    position : (3,) camera centre in world coordinates.
-    wxyz : (4,) camera-to-world rotation.
-    fov : vertical field of view in radians.
-    aspect : canvas width / height.
-
-    Examples
-    --------
-    >>> cam = CameraView(np.array([0.0, 0, -5]), np.array([1.0, 0, 0, 0]), 1.0, 1.5)
-    >>> uv, depth = cam.project(np.zeros((1, 3)))
-    >>> uv.round(3).tolist(), depth.tolist()
-    ([[0.5, 0.5]], [5.0])
-    """
-
-    position: np.ndarray
-    wxyz: np.ndarray
-    fov: float
-    aspect: float
-
-    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Screen coordinates in [0, 1]^2 (origin top left) and depth of ``points``."""
-        R = quat_to_matrix(self.wxyz)
-        cam = (np.asarray(points, dtype=np.float64) - self.position) @ R
-        depth = cam[:, 2]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            half_h = np.tan(self.fov / 2.0)
-            u = 0.5 + cam[:, 0] / depth / (2.0 * half_h * self.aspect)
-            v = 0.5 + cam[:, 1] / depth / (2.0 * half_h)
-        return np.stack([u, v], axis=1), depth
-
-    def ray(self, screen_pos: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
-        """World-space origin and unit direction of the ray through ``screen_pos``."""
-        half_h = np.tan(self.fov / 2.0)
-        d_cam = np.array(
-            [
-                (screen_pos[0] - 0.5) * 2.0 * half_h * self.aspect,
-                (screen_pos[1] - 0.5) * 2.0 * half_h,
-                1.0,
-            ]
-        )
-        d = quat_to_matrix(self.wxyz) @ d_cam
-        return np.asarray(self.position, dtype=np.float64), d / np.linalg.norm(d)
-
-
-def raycast(
-    vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, direction: np.ndarray
-) -> tuple[int, np.ndarray] | None:
-    """Nearest face hit by a ray (Moller-Trumbore over all faces, vectorised).
-
-    Returns ``(face_index, hit_point)`` or ``None`` when the ray misses.  Picking is
-    the only place the editor needs this, so a brute-force test (a few ms for 70K faces)
-    is preferred over building an acceleration structure per shape.
-
-    Examples
-    --------
-    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]); F = np.array([[0, 1, 2]])
-    >>> f, p = raycast(V, F, np.array([0.2, 0.2, 1.0]), np.array([0.0, 0, -1]))
-    >>> f, p.round(3).tolist()
-    (0, [0.2, 0.2, 0.0])
-    """
-    o = np.asarray(origin, dtype=np.float64)
-    d = np.asarray(direction, dtype=np.float64)
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    e1, e2 = b - a, c - a
-    p = np.cross(d, e2)
-    det = np.einsum("ij,ij->i", e1, p)
-    # parallel-ray test relative to the face's size: picking works at any mesh scale
-    size = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * np.linalg.norm(d)
-    ok = np.abs(det) > 1e-12 * size
-    inv = np.zeros_like(det)
-    inv[ok] = 1.0 / det[ok]
-    s = o - a
-    u = np.einsum("ij,ij->i", s, p) * inv
-    q = np.cross(s, e1)
-    v = (q @ d) * inv
-    t = np.einsum("ij,ij->i", e2, q) * inv
-    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
-    if not hit.any():
-        return None
-    f = int(np.flatnonzero(hit)[np.argmin(t[hit])])
-    return f, o + t[f] * d
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Area-weighted unit vertex normals (zero for unreferenced vertices)."""
-    fn = np.cross(
-        vertices[faces[:, 1]] - vertices[faces[:, 0]], vertices[faces[:, 2]] - vertices[faces[:, 0]]
-    )
-    n = np.zeros_like(vertices)
-    for k in range(3):
-        np.add.at(n, faces[:, k], fn)
-    norm = np.linalg.norm(n, axis=1, keepdims=True)
-    return np.divide(n, norm, out=np.zeros_like(n), where=norm > 0)
-
-
-# --------------------------------------------------------------------------- data classes
-
-
-@dataclasses.dataclass
-class Handle:
-    """One handle region: vertices moved together by one gizmo.
-
-    Examples
-    --------
-    >>> h = Handle.create("tip", np.array([0, 1]), np.array([[0.0, 0, 0], [2.0, 0, 0]]))
-    >>> h.position.tolist()
-    [1.0, 0.0, 0.0]
-    >>> h.targets().tolist()
-    [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0]]
-    """
-
-    name: str
-    vertices: np.ndarray  # (k,) int64 vertex indices
-    anchor: np.ndarray  # (k, 3) positions when the handle was made
-    wxyz: np.ndarray  # gizmo rotation
-    position: np.ndarray  # gizmo position; starts at the anchor centroid
-    frozen: bool = False
-
-    @classmethod
-    def create(cls, name: str, vertices: np.ndarray, anchor: np.ndarray) -> Handle:
-        """A handle whose gizmo sits at the centroid of ``anchor`` with no rotation."""
-        anchor = np.array(anchor, dtype=np.float64).reshape(-1, 3)
-        return cls(
-            name=name,
-            vertices=np.array(vertices, dtype=np.int64).reshape(-1),
-            anchor=anchor,
-            wxyz=np.array([1.0, 0.0, 0.0, 0.0]),
-            position=anchor.mean(axis=0),
-        )
-
-    @property
-    def pivot(self) -> np.ndarray:
-        """Centre of rotation: the anchor centroid."""
-        return self.anchor.mean(axis=0)
-
-    def targets(self) -> np.ndarray:
-        """Target positions of the handle vertices for the current gizmo pose."""
-        R = quat_to_matrix(self.wxyz)
-        return (self.anchor - self.pivot) @ R.T + self.position
-
-    def copy(self) -> Handle:
-        # Arrays are replaced, never mutated, so sharing them is safe.
-        return dataclasses.replace(self)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "name": self.name,
-            "vertices": self.vertices.tolist(),
-            "frozen": self.frozen,
-            "anchor": self.anchor.tolist(),
-            "wxyz": self.wxyz.tolist(),
-            "position": self.position.tolist(),
-            "targets": self.targets().tolist(),
-        }
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any], n_vertices: int) -> Handle:
-        """Inverse of :meth:`to_dict`; a handle given only by targets gets them as anchor.
-
-        Every field is checked with the rules of :mod:`arapkit.validate`; a bad one raises
-        :class:`InputError` naming the handle and the field.
-        """
-        if not isinstance(d, dict):
-            raise InputError(f"session handle: expected an object, got {type(d).__name__}")
-        name = d.get("name", "handle")
-        if not isinstance(name, str) or not name or "\0" in name:
-            raise InputError(f"session handle: 'name' must be a non-empty string, got {name!r:.40}")
-        where = f"session handle {name!r}"
-        if "vertices" not in d:
-            raise InputError(f"{where}: no 'vertices'")
-        idx = validate.handle_indices(d["vertices"], n_vertices, f"{where}: 'vertices'")
-        key = "anchor" if "anchor" in d else "targets"
-        if key not in d:
-            raise InputError(f"{where}: needs 'anchor' or 'targets'")
-        anchor = validate.real_array(d[key], f"{where}: {key!r}")
-        if anchor.shape != (idx.size, 3):
-            raise InputError(f"{where}: expected {idx.size} {key} rows of 3, got {anchor.shape}")
-        validate.check_finite_positions(anchor, f"{where}: {key!r}")
-        h = cls.create(name, idx, anchor)
-        if "wxyz" in d or "position" in d:
-            h.wxyz = validate.quaternion(d.get("wxyz", [1, 0, 0, 0]), f"{where}: 'wxyz'")
-            h.position = validate.vec3(d.get("position", h.position.tolist()),
-                                       f"{where}: 'position'")
-        frozen = d.get("frozen", False)
-        if not isinstance(frozen, bool):
-            raise InputError(f"{where}: 'frozen' must be true or false, got {frozen!r:.40}")
-        h.frozen = frozen
-        with np.errstate(over="ignore", invalid="ignore"):
-            finite = np.isfinite(h.targets()).all()
-        if not finite:
-            raise InputError(f"{where}: its targets are beyond double precision (too large)")
-        return h
-
-
-@dataclasses.dataclass
-class SolverSettings:
-    """What the user chose in the solver panel.
-
-    ``live_budget_ms`` and ``live_max_iter`` bound the work before the first update of
-    a drag is sent; the solve then continues to ``tol`` / ``max_iter`` unless a newer
-    drag supersedes it.
-    """
-
-    method: str = "arap"
-    weights: str = DEFAULT_WEIGHTS
-    tol: float = 1e-3
-    max_iter: int = 200
-    live_max_iter: int = 8
-    live_budget_ms: float = 60.0
-
-    def to_dict(self) -> dict[str, Any]:
-        return dataclasses.asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict[str, Any]) -> SolverSettings:
-        """Settings from a session's ``solver`` object, each field checked.
-
-        Examples
-        --------
-        >>> SolverSettings.from_dict({"tol": 1e-4}).tol
-        0.0001
-        """
-        known = [f.name for f in dataclasses.fields(cls)]
-        validate.keys_of(d, known, "session solver")
-        s = cls(**d)
-        if not isinstance(s.method, str) or s.method not in METHODS:
-            raise InputError(f"session solver: method {s.method!r:.40}: expected one of {METHODS}")
-        if not isinstance(s.weights, str) or s.weights not in WEIGHT_KINDS:
-            raise InputError(f"session solver: weights {s.weights!r:.40}: expected one of "
-                             f"{', '.join(WEIGHT_KINDS)}")
-        s.tol = validate.tolerance(s.tol, "session solver: tol")
-        s.max_iter = validate.iteration_cap(s.max_iter, "session solver: max_iter")
-        s.live_max_iter = validate.iteration_cap(s.live_max_iter, "session solver: live_max_iter")
-        s.live_budget_ms = validate.number(s.live_budget_ms, "session solver: live_budget_ms",
-                                           lo=0.0, hi=3.6e6)
-        return s
 
 
 @dataclasses.dataclass(frozen=True)
@@ -339,7 +83,7 @@ class EditorState:
 
     Examples
     --------
-    >>> from arapkit.shapes import bar
+    >>> from arapkit.mesh.shapes import bar
     >>> st = EditorState(bar(), rings=2)
     >>> int(st.rings.min()), int(st.rings.max())
     (2, 2)
@@ -349,7 +93,7 @@ class EditorState:
         self.mesh = mesh
         self.mesh_path = None if mesh_path is None else str(mesh_path)
         self.vertices = np.array(mesh.vertices, dtype=np.float64)
-        self.rings = self._check_rings(rings)
+        self.rings = self.check_rings(rings)
         self.handles: list[Handle] = []
         self.selection = np.zeros(0, dtype=np.int64)
         self.settings = SolverSettings()
@@ -362,9 +106,15 @@ class EditorState:
     def n(self) -> int:
         return int(self.mesh.n_vertices)
 
-    def _check_rings(self, rings: int | np.ndarray, source: str = "rings") -> np.ndarray:
-        # the library's one rule (1..MAX_RINGS), as for the command line and rings files
-        return validate.ring_sizes(rings, self.n, source).astype(np.int64)
+    def check_rings(self, rings: int | np.ndarray, source: str = "rings") -> np.ndarray:
+        """r for every vertex of this mesh by the library's one rule
+        (:func:`arapkit.validate.ring_sizes`), as for the command line and rings files."""
+        return validate.ring_sizes(rings, self.n, source)
+
+    def clear_history(self) -> None:
+        """Forget the undo history (start-up choices are not undoable edits)."""
+        self._undo.clear()
+        self._redo.clear()
 
     # ---------------------------------------------------------------- undo / redo
     def _snapshot(self) -> _Snapshot:
@@ -419,13 +169,11 @@ class EditorState:
 
     def vertices_near(self, point: np.ndarray, radius: float) -> np.ndarray:
         """Vertices of the shown shape within ``radius`` of ``point`` (Euclidean)."""
-        d2 = np.sum((self.vertices - np.asarray(point, dtype=np.float64)) ** 2, axis=1)
-        return np.flatnonzero(d2 <= radius * radius)
+        return vertices_within(self.vertices, point, radius)
 
     def nearest_vertex(self, point: np.ndarray) -> int:
         """Index of the shown vertex closest to ``point``."""
-        d2 = np.sum((self.vertices - np.asarray(point, dtype=np.float64)) ** 2, axis=1)
-        return int(np.argmin(d2))
+        return nearest_vertex(self.vertices, point)
 
     def select_near(self, point: np.ndarray, radius: float, mode: str = "add") -> np.ndarray:
         """Select the vertices within ``radius`` of ``point`` (at least the nearest one)."""
@@ -444,15 +192,11 @@ class EditorState:
     ) -> np.ndarray:
         """Select the vertices whose projection falls inside a screen rectangle.
 
-        ``front_only`` keeps only vertices whose normal faces the camera, a cheap
-        stand-in for an occlusion test that matches what users expect on closed shapes.
+        ``front_only`` keeps only the vertices facing the camera (see
+        :func:`arapkit.editor.geometry.in_screen_rect`).
         """
-        uv, depth = camera.project(self.vertices)
-        lo, hi = np.minimum(screen_min, screen_max), np.maximum(screen_min, screen_max)
-        inside = (depth > 0) & np.all((uv >= lo) & (uv <= hi), axis=1)
-        if front_only:
-            nrm = vertex_normals(self.vertices, np.asarray(self.mesh.faces))
-            inside &= np.einsum("ij,ij->i", nrm, camera.position - self.vertices) > 0
+        inside = in_screen_rect(camera, self.vertices, np.asarray(self.mesh.faces), screen_min,
+                                screen_max, front_only)
         return self._combine(np.flatnonzero(inside), mode)
 
     def clear_selection(self) -> None:
@@ -562,7 +306,7 @@ class EditorState:
         return True
 
     def add_handle_set(self, handle_set: Any, record: bool = True) -> list[Handle]:
-        """Add the groups of an :class:`arapkit.handles.HandleSet` (e.g. ``--handles``).
+        """Add the groups of an :class:`arapkit.mesh.selection.HandleSet` (e.g. ``--handles``).
 
         A group's targets become the new handle's anchor, so its gizmo starts where the
         file put it; ``fixed`` groups come in frozen.
@@ -594,13 +338,13 @@ class EditorState:
     # ---------------------------------------------------------------- rigidity
     def set_global_rings(self, r: int) -> None:
         """Give every vertex the same ``r``."""
-        new = self._check_rings(validate.ring_size(r, "global r"))
+        new = self.check_rings(validate.ring_size(r, "global r"))
         self.checkpoint()
         self.rings = new
 
     def load_rings(self, rings: np.ndarray) -> None:
         """Replace the rigidity map (e.g. a learned rings file)."""
-        new = self._check_rings(rings)
+        new = self.check_rings(rings)
         self.checkpoint()
         self.rings = new
 
@@ -674,20 +418,9 @@ class EditorState:
         """Load handles, rings and settings from a session dict made for this mesh.
 
         Everything is checked before anything changes, so a bad session leaves the editor
-        as it was.
+        as it was.  Method names of older sessions are read (see :class:`SolverSettings`).
         """
-        if not isinstance(d, dict):
-            raise InputError(f"session: expected a JSON object, got {type(d).__name__}")
-        if d.get("format") != SESSION_FORMAT:
-            raise InputError(
-                f"session: not an arapkit editor session (format={d.get('format')!r:.40})")
-        n_vertices = d.get("n_vertices", -1)
-        if (not isinstance(n_vertices, int) or isinstance(n_vertices, bool)
-                or n_vertices != self.n):
-            raise InputError(
-                f"session: made for a mesh of {n_vertices!r:.40} vertices, "
-                f"the loaded mesh has {self.n}"
-            )
+        session_file.check_header(d, self.n)
         raw = d.get("handles", [])
         if not isinstance(raw, list):
             raise InputError(f"session: 'handles' must be a list, got {type(raw).__name__}")
@@ -698,7 +431,7 @@ class EditorState:
         all_idx = np.concatenate([h.vertices for h in handles]) if handles else np.zeros(0)
         if np.unique(all_idx).size != all_idx.size:
             raise InputError("session: a vertex belongs to two handles")
-        rings = self._check_rings(d["rings"], "session rings") if "rings" in d else self.rings
+        rings = self.check_rings(d["rings"], "session rings") if "rings" in d else self.rings
         settings = SolverSettings.from_dict(d.get("solver", {}))
         if record:
             self.checkpoint()
@@ -706,24 +439,12 @@ class EditorState:
 
     def save_session(self, path: str | os.PathLike[str]) -> Path:
         """Write the session as JSON (atomically: a crash never leaves half a file)."""
-        from arapkit.fileio import write_json
-
-        path = Path(path)
-        write_json(path, self.to_dict(), indent=1)
-        return path
+        return session_file.write_session(path, self.to_dict())
 
     @staticmethod
     def read_session(path: str | os.PathLike[str]) -> dict[str, Any]:
         """Parse a session file, with a one-line error for a bad one."""
-        try:
-            d = validate.parse_json(validate.read_input(path, "sessions"), str(path))
-        except InputError as exc:
-            shown = repr(str(path)) if "\0" in str(path) else str(path)  # never print a NUL
-            why = str(exc).removeprefix(f"{shown}: ")
-            raise InputError(f"{shown}: cannot read session ({why})") from None
-        if not isinstance(d, dict):
-            raise InputError(f"{path}: a session must be a JSON object")
-        return d
+        return session_file.read_session(path)
 
     @classmethod
     def from_session(cls, path: str | os.PathLike[str]) -> EditorState:
@@ -739,7 +460,7 @@ class EditorState:
         mesh_file = Path(path).parent / mesh_path
         mesh = load_mesh(str(mesh_file))
         if d.get("weld") is not None:
-            from arapkit.welding import weld
+            from arapkit.mesh.welding import weld
 
             mesh = weld(mesh, d["weld"])
         st = cls(mesh, mesh_path=str(mesh_file))

@@ -1,6 +1,6 @@
 """Colour views of the editor: rigidity r (1 blue ... 6 red) and per-vertex energy.
 
-The colours come from :mod:`arapkit.colors`, the same as in the figures.
+The colours come from :mod:`arapkit.plots.colors`, the same as in the figures.
 
 viser meshes carry one colour each, so a coloured view is drawn as a few sub-meshes, one
 per colour bin, each with only the vertices its faces use.  During a drag only their
@@ -21,7 +21,7 @@ import dataclasses
 
 import numpy as np
 
-from arapkit.colors import ENERGY_CMAP, RING_COLORS
+from arapkit.plots.colors import ENERGY_CMAP, RING_COLORS
 
 ENERGY_BINS = 8
 SHADED_COLOR = (190, 195, 205)
@@ -58,7 +58,8 @@ def energy_labels(vertex_energy: np.ndarray, vmax: float, bins: int = ENERGY_BIN
 
 
 def energy_colors(bins: int = ENERGY_BINS) -> list[tuple[int, int, int]]:
-    """Bin colours from :data:`arapkit.colors.ENERGY_CMAP` (pale = low energy, dark red = high)."""
+    """Bin colours from :data:`arapkit.plots.colors.ENERGY_CMAP` (pale = low energy, dark red =
+    high)."""
     from matplotlib import colormaps
 
     cmap = colormaps[ENERGY_CMAP]

@@ -17,8 +17,8 @@ bounded delay, and iterations run to convergence once the user stops moving.
 
 Examples
 --------
->>> from arapkit.shapes import bar, bar_bend
->>> from arapkit.editor.state import SolverSettings
+>>> from arapkit.mesh.shapes import bar, bar_bend
+>>> from arapkit.editor.settings import SolverSettings
 >>> mesh = bar(); h, t = bar_bend(mesh, 30)
 >>> updates = []
 >>> w = SolveWorker(updates.append); w.start()
@@ -42,9 +42,9 @@ from typing import Any
 
 import numpy as np
 
-from arapkit.editor.state import SolverSettings
+from arapkit.editor.settings import SolverSettings
 from arapkit.errors import worded_for
-from arapkit.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 LAPLACIAN_WEIGHTS = WEIGHT_KINDS
 
@@ -97,28 +97,27 @@ class _Engine:
         self._key: tuple = ()
         self._lap_key: tuple = ()
 
-    def arap(self, req: SolveRequest) -> Any:
+    def deformer_for(self, req: SolveRequest) -> Any:
+        """The :class:`arapkit.Deformer` for ``req``, rebuilt only when the set-up changed."""
         from arapkit import Deformer
 
         s = req.settings
-        # volumetric ARAP is r-ring ARAP on the tetrahedralised inside (tetrahedralised once
-        # per mesh: the deformer is kept while only handles and r change)
-        volumetric = s.method == "volumetric"
-        energy = "rring" if s.method in ("arap", "volumetric") else s.method
-        # only r-ring ARAP has a rigidity map; the other methods ignore the painted one
-        rings = req.rings if energy == "rring" else 1
-        key = (id(req.mesh), s.weights, s.method)
+        info = s.info
+        # only a method with a rigidity map reads the painted one; the others ignore it
+        rings = req.rings if info.rigidity_map else 1
+        # a volumetric deformer tetrahedralises once per mesh: kept while handles and r change
+        key = (id(req.mesh), s.weights, s.method, s.volumetric)
         if self.deformer is None or self._key != key:
             self.deformer = Deformer(
-                req.mesh, req.handles, rings=rings, energy=energy, weights=s.weights,
+                req.mesh, req.handles, rings=rings, energy=s.method, weights=s.weights,
                 tol=s.tol, max_iter=s.max_iter,
-                **({"volumetric": True} if volumetric else {}),
+                **({"volumetric": True} if s.volumetric else {}),
             )
             self._key = key
             self.mesh = req.mesh
             return self.deformer
         d = self.deformer
-        if energy == "rring" and not np.array_equal(d.rings, req.rings):
+        if info.rigidity_map and not np.array_equal(d.rings, req.rings):
             d.set_rings(req.rings)
         if not np.array_equal(d.handles, req.handles):
             d.set_handles(req.handles)
@@ -263,10 +262,11 @@ class SolveWorker:
                        error="no handles: select vertices and make a handle")
             return
         t0 = time.perf_counter()
-        if req.settings.method == "laplacian":
-            self._solve_laplacian(req, t0)
+        one_shot = _ONE_SHOT.get(req.settings.method)
+        if one_shot is not None:
+            one_shot(self, req, t0)
         else:
-            self._solve_arap(req, t0)
+            self._solve_iterative(req, t0)
 
     def _solve_laplacian(self, req: SolveRequest, t0: float) -> None:
         ed = self._engine.laplacian_editor(req)
@@ -281,9 +281,9 @@ class SolveWorker:
         self._emit(req, V, np.nan, 1, True, True, setup_ms=setup)
         self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
 
-    def _solve_arap(self, req: SolveRequest, t0: float) -> None:
+    def _solve_iterative(self, req: SolveRequest, t0: float) -> None:
         s = req.settings
-        d = self._engine.arap(req)
+        d = self._engine.deformer_for(req)
         setup = (time.perf_counter() - t0) * 1e3
         init = self._start_shape(req)
         live = {"sent": False, "last": 0.0, "count": 0}
@@ -325,6 +325,12 @@ class SolveWorker:
     def _keep(self, req: SolveRequest, V: np.ndarray) -> None:
         if np.isfinite(V).all():  # the solver refuses non-finite results; never keep one
             self._shape, self._shape_mesh = V, req.mesh
+
+
+#: methods that :class:`arapkit.Deformer` does not run, with the one linear solve that does
+_ONE_SHOT: dict[str, Callable[[SolveWorker, SolveRequest, float], None]] = {
+    "laplacian": SolveWorker._solve_laplacian,
+}
 
 
 def _is_input_error(exc: BaseException) -> bool:

@@ -1,0 +1,344 @@
+"""Positional constraints and the sparse Cholesky factor behind every solver.
+
+Both ARAP (:mod:`arapkit.arap.problem`) and Laplacian editing (:mod:`arapkit.methods.laplacian`)
+solve
+``A x = b`` for the free vertices of a symmetric positive (semi-)definite ``A`` with some
+vertices held at given positions. This module holds what they share:
+
+* :func:`check_handles` / :func:`check_targets`: validation with one-line errors;
+* :func:`anchor_components`: vertices of connected components without a handle, which
+  must be held too (otherwise the component can translate freely and ``A`` is singular);
+* :class:`Elimination`: the split into free and constrained vertices, the reduced matrix
+  ``A_ff`` (factorised once) and the coupling ``A_fc`` that moves the constrained values to
+  the right-hand side, ``A_ff x_f = b_f - A_fc x_c``;
+* :class:`CholeskyFactor`: CHOLMOD (via cholespy) with its C-level chatter silenced.
+
+Anything with ``name``, ``n_vertices``, ``n_components`` and ``component_labels`` (a
+:class:`~arapkit.mesh.model.Mesh` or an :class:`~arapkit.arap.graph.EdgeGraph`) can be
+constrained.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from contextlib import contextmanager
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..errors import Advice, InputError
+from ..validate import handle_indices, target_positions
+
+if TYPE_CHECKING:
+    from ..mesh.model import Mesh
+    from .graph import EdgeGraph
+
+__all__ = [
+    "CholeskyFactor",
+    "Elimination",
+    "anchor_components",
+    "check_handles",
+    "check_targets",
+    "quiet_c_output",
+]
+
+
+def check_handles(mesh: Mesh | EdgeGraph, handles) -> np.ndarray:
+    """Validate handle vertex indices (integers, unique, in range) and return them as int64.
+
+    A boolean array of one value per vertex is read as a mask. The rule is
+    :func:`arapkit.validate.handle_indices`.
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar
+    >>> check_handles(bar(), [0, 5]).tolist()
+    [0, 5]
+    """
+    return handle_indices(handles, mesh.n_vertices, mesh.name)
+
+
+def check_targets(handles: np.ndarray, targets, name: str = "targets") -> np.ndarray:
+    """Validate handle targets: real, shape (len(handles), 3), finite."""
+    return target_positions(handles, targets, name)
+
+
+#: what to do with a connected component that holds no handle (the first is the default)
+FREE_COMPONENT_POLICIES = ("follow", "fix", "error")
+
+
+def anchor_components(mesh: Mesh | EdgeGraph, handles: np.ndarray, policy: str = "follow"):
+    """Vertices that must be held fixed because their component has no handle.
+
+    Without a handle such a component can translate freely and the system is singular, so
+    its vertices are taken out of the solve. Its energy is 0 under any rigid motion, so
+    every rigid placement is an equally good minimiser; the policy picks one.
+
+    Parameters
+    ----------
+    policy : {"follow", "fix", "error"}
+        ``"follow"`` (default) moves each such component afterwards by the rigid motion of
+        the nearest part that has handles (:func:`follow_rigidly`: a character's eyes and
+        teeth stay in its head); ``"fix"`` keeps them at rest; ``"error"`` refuses.
+
+    Returns
+    -------
+    fixed : (f,) int64
+        Vertices to hold at their rest positions.
+    notes : list of str
+        What was done, naming the components.
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar
+    >>> anchor_components(bar(), [0])[0].size
+    0
+    """
+    labels = mesh.component_labels
+    anchored = np.zeros(mesh.n_components, dtype=bool)
+    anchored[labels[handles]] = True
+    if anchored.all():
+        return np.empty(0, dtype=np.int64), []
+    missing = np.flatnonzero(~anchored)
+    sizes = np.bincount(labels, minlength=mesh.n_components)[missing]
+    firsts = [int(np.flatnonzero(labels == c)[0]) for c in missing[:3]]
+    single = int((sizes == 1).sum())
+    desc = (
+        f"{len(missing)} connected component(s) without a handle ("
+        + ", ".join(f"{s} vertices incl. vertex {f}" for s, f in zip(sizes[:3], firsts))
+        + (", ..." if len(missing) > 3 else "")
+        + (f"; {single} of them isolated vertices" if single else "")
+        + ")"
+    )
+    if policy == "error":
+        raise InputError(f"{mesh.name}: {desc}; add a handle there or use free_components='fix'")
+    if policy not in FREE_COMPONENT_POLICIES:
+        raise InputError(f"unknown free_components policy '{policy}' (use "
+                         f"{', '.join(repr(p) for p in FREE_COMPONENT_POLICIES)})")
+    fixed = np.flatnonzero(~anchored[labels]).astype(np.int64)
+    what = ("move rigidly with the nearest part that has handles (isolated vertices stay at "
+            "rest)" if policy == "follow" else "are held fixed at rest")
+    return fixed, [f"{desc} {what}"]
+
+
+def follow_rigidly(mesh: Mesh | EdgeGraph, free: np.ndarray, deformed: np.ndarray,
+                   rotations: np.ndarray | None = None, k: int = 32) -> None:
+    """Move each component of ``free`` by the rigid motion of its nearest anchored vertices.
+
+    For a component C without handles, the anchored vertices nearest to C at rest (the
+    nearest one of each vertex of C, and the ``k`` nearest its centroid) are fitted by the
+    best rigid motion rest -> ``deformed`` (Kabsch), which is then applied to C in place;
+    ``rotations`` of C's vertices are set to it. Single vertices stay where they are. C's
+    own energy is 0 before and after, so the solution stays a minimiser.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from arapkit import Mesh
+    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 2], [1, 0, 2], [0, 1, 2]], float)
+    >>> m = Mesh(V, [[0, 1, 2], [3, 4, 5]])
+    >>> P = V.copy(); P[:3] += [5, 0, 0]           # the handled triangle moved by +5 x
+    >>> follow_rigidly(m, np.array([3, 4, 5]), P)
+    >>> (np.round(P[3:] - V[3:], 9) + 0.0).tolist()
+    [[5.0, 0.0, 0.0], [5.0, 0.0, 0.0], [5.0, 0.0, 0.0]]
+    """
+    from scipy.spatial import cKDTree
+
+    V = np.asarray(mesh.vertices)
+    labels = mesh.component_labels
+    is_free = np.zeros(len(V), dtype=bool)
+    is_free[free] = True
+    anchored = np.flatnonzero(~is_free)
+    if len(anchored) == 0:
+        return
+    tree = cKDTree(V[anchored])
+    for c in np.unique(labels[free]):
+        members = np.flatnonzero(labels == c)
+        if len(members) < 2:
+            continue
+        near = tree.query(V[members], k=1)[1]
+        centre = tree.query(V[members].mean(axis=0), k=min(k, len(anchored)))[1]
+        a = anchored[np.unique(np.concatenate([np.ravel(near), np.ravel(centre)]))]
+        src, dst = V[a], deformed[a]
+        ms, md = src.mean(axis=0), dst.mean(axis=0)
+        U, _, Vt = np.linalg.svd((src - ms).T @ (dst - md))
+        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+        R = Vt.T @ D @ U.T
+        deformed[members] = (V[members] - ms) @ R.T + md
+        if rotations is not None:
+            rotations[members] = R
+
+
+def _flush_c_stdio() -> None:
+    """Flush the C library's stdio buffers (CHOLMOD's printf output sits there)."""
+    try:
+        import ctypes
+
+        ctypes.CDLL(None).fflush(None)
+    except (OSError, AttributeError):  # no libc symbols on this platform: nothing to flush
+        pass
+
+
+@contextmanager
+def quiet_c_output():
+    """Silence C-level stdout and stderr: CHOLMOD prints a warning before cholespy raises.
+
+    stdout must carry results only (the command line pipes it), so the warning is flushed
+    into /dev/null before the streams are restored.
+
+    Examples
+    --------
+    >>> with quiet_c_output():
+    ...     pass  # C code called here prints nothing
+    """
+    sys.stdout.flush()
+    sys.stderr.flush()
+    try:
+        saved = [os.dup(1), os.dup(2)]
+    except OSError:
+        yield
+        return
+    try:
+        with open(os.devnull, "w") as null:
+            os.dup2(null.fileno(), 1)
+            os.dup2(null.fileno(), 2)
+            try:
+                yield
+            finally:
+                _flush_c_stdio()
+    finally:
+        for fd, target in zip(saved, (1, 2)):
+            os.dup2(fd, target)
+            os.close(fd)
+
+
+class CholeskyFactor:
+    """Sparse Cholesky factor (CHOLMOD via cholespy) of a symmetric positive definite matrix.
+
+    Examples
+    --------
+    >>> import numpy as np, scipy.sparse as sp
+    >>> f = CholeskyFactor(sp.csr_matrix(np.array([[4.0, 1.0], [1.0, 3.0]])), "demo")
+    >>> np.round(f.solve(np.array([[1.0], [2.0]])).ravel(), 6).tolist()
+    [0.090909, 0.636364]
+    """
+
+    def __init__(self, A: sp.spmatrix, what: str, remedy: str | Advice = "") -> None:
+        from cholespy import CholeskySolverD, MatrixType
+
+        A = sp.coo_matrix(A)
+        self.n = A.shape[0]
+        try:
+            with quiet_c_output():
+                self._solver = CholeskySolverD(
+                    self.n,
+                    A.row.astype(np.int32),
+                    A.col.astype(np.int32),
+                    A.data.astype(np.float64),
+                    MatrixType.COO,
+                )
+        except ValueError:
+            msg = f"{what}: the system matrix is not positive definite"
+            raise InputError(
+                remedy.after(msg) if isinstance(remedy, Advice) else msg + remedy
+            ) from None
+
+    def solve(self, B: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """Solve ``A X = B`` for a (n,) or (n, k) right-hand side (into ``out`` if given)."""
+        B = np.ascontiguousarray(B, dtype=np.float64)
+        X = np.empty_like(B) if out is None else out
+        self._solver.solve(B, X)
+        return X
+
+
+@dataclass(frozen=True)
+class Elimination:
+    """Free/constrained split of ``A x = b`` with ``A_ff`` factorised once.
+
+    Attributes
+    ----------
+    free, constrained : (f,), (c,) int64
+        Vertex ids (in the numbering of the matrix).
+    slot : (n,) int64
+        Row of each vertex in the reduced system, -1 for constrained vertices.
+    A_fc : (f, c) CSR
+        Coupling block: the reduced right-hand side is ``b_f - A_fc x_c``.
+    factor : CholeskyFactor or None
+        Factor of ``A_ff`` (None when every vertex is constrained).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> el = Elimination.from_edges(3, np.array([[0, 1], [1, 2]]), np.ones(2), [0, 2], "chain")
+    >>> x = el.solve(-el.A_fc @ np.array([[0.0], [2.0]]))  # the middle of 0 and 2
+    >>> el.free.tolist(), np.round(x, 12).ravel().tolist()
+    ([1], [1.0])
+    """
+
+    free: np.ndarray
+    constrained: np.ndarray
+    slot: np.ndarray
+    A_fc: sp.csr_matrix
+    factor: CholeskyFactor | None
+
+    @staticmethod
+    def _split(n: int, constrained) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        cons = np.asarray(constrained, dtype=np.int64)
+        is_free = np.ones(n, dtype=bool)
+        is_free[cons] = False
+        free = np.flatnonzero(is_free)
+        slot = np.full(n, -1, dtype=np.int64)
+        slot[free] = np.arange(len(free))
+        return free, cons, slot
+
+    @classmethod
+    def from_edges(cls, n: int, edges: np.ndarray, weights: np.ndarray, constrained,
+                   what: str, remedy: str = "") -> Elimination:
+        """Eliminate from the graph Laplacian ``sum_e w_e (e_i - e_j)(e_i - e_j)^T``.
+
+        The reduced blocks are assembled straight from the edge list (no full n x n matrix).
+        """
+        free, cons, slot = cls._split(n, constrained)
+        cslot = np.full(n, -1, dtype=np.int64)
+        cslot[cons] = np.arange(len(cons))
+        a, b, w = edges[:, 0], edges[:, 1], weights
+        sa, sb = slot[a], slot[b]
+        nf, nc = len(free), len(cons)
+        ff = (sa >= 0) & (sb >= 0)
+        diag = (np.bincount(sa[sa >= 0], w[sa >= 0], nf)
+                + np.bincount(sb[sb >= 0], w[sb >= 0], nf))
+        fc = (sa >= 0) & (sb < 0)
+        cf = (sa < 0) & (sb >= 0)
+        A_fc = sp.csr_matrix(
+            (np.concatenate([-w[fc], -w[cf]]),
+             (np.concatenate([sa[fc], sb[cf]]), np.concatenate([cslot[b[fc]], cslot[a[cf]]]))),
+            shape=(nf, nc),
+        )
+        factor = None
+        if nf:
+            A = sp.coo_matrix(
+                (np.concatenate([-w[ff], -w[ff], diag]),
+                 (np.concatenate([sa[ff], sb[ff], np.arange(nf)]),
+                  np.concatenate([sb[ff], sa[ff], np.arange(nf)]))),
+                shape=(nf, nf),
+            )
+            factor = CholeskyFactor(A, what, remedy)
+        return cls(free, cons, slot, A_fc, factor)
+
+    @classmethod
+    def from_matrix(cls, A: sp.spmatrix, constrained, what: str, remedy: str = "") -> Elimination:
+        """Eliminate from an assembled symmetric matrix (e.g. the normal equations)."""
+        A = sp.csr_matrix(A)
+        free, cons, slot = cls._split(A.shape[0], constrained)
+        Af = A[free]
+        factor = CholeskyFactor(Af[:, free], what, remedy) if len(free) else None
+        return cls(free, cons, slot, Af[:, cons].tocsr(), factor)
+
+    def solve(self, rhs: np.ndarray, out: np.ndarray | None = None) -> np.ndarray:
+        """``A_ff^{-1} rhs`` for a reduced right-hand side (f,) or (f, k)."""
+        if self.factor is None:
+            return np.empty_like(rhs) if out is None else out
+        return self.factor.solve(rhs, out)

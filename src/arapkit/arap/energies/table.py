@@ -1,0 +1,111 @@
+"""The table of local/global energies: each energy module registers its builder here.
+
+An energy is one module with a builder and one :func:`register_energy` call at import;
+:func:`make_energy` looks the name up, applies the checks every energy shares (its options,
+its rigidity map, whether it needs triangles) and calls the builder. Importing
+:mod:`arapkit.arap.energies` imports every energy module, so the table is full.
+
+Examples
+--------
+>>> from arapkit.arap.energies import energy_info
+>>> energy_info("sr-arap").descent, energy_info("rring").rigidity_map
+(False, True)
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ...errors import InputError
+
+if TYPE_CHECKING:
+    from ..graph import EdgeGraph
+    from .base import NeighbourhoodEnergy
+
+__all__ = ["EnergyInfo", "energy_info", "energy_names", "make_energy", "register_energy"]
+
+
+@dataclass(frozen=True)
+class EnergyInfo:
+    """One local/global energy: how to build it and the facts its form fixes.
+
+    Attributes
+    ----------
+    name : str
+    build : callable(graph, w, weights_kind, rings, perm, **options) -> NeighbourhoodEnergy
+        ``rings`` is r per vertex in the graph's numbering (None without a rigidity map);
+        ``perm`` (internal -> caller, or None) maps per-vertex options given in the caller's
+        numbering.
+    descent : bool
+        Each local and global step minimises the energy exactly over its block, so the
+        energy never rises (and Anderson acceleration's energy safeguard applies).
+    rigidity_map : bool
+        Takes r per vertex.
+    needs_faces : bool
+        Defined on triangles (refused on a plain edge graph).
+    options : tuple of str
+        The builder's keyword options.
+    """
+
+    name: str
+    build: Callable[..., NeighbourhoodEnergy]
+    descent: bool = True
+    rigidity_map: bool = False
+    needs_faces: bool = False
+    options: tuple[str, ...] = ()
+
+
+_ENERGIES: dict[str, EnergyInfo] = {}
+
+
+def register_energy(info: EnergyInfo) -> EnergyInfo:
+    """Add an energy to the table (its module calls this once, at import)."""
+    _ENERGIES[info.name] = info
+    return info
+
+
+def energy_names() -> tuple[str, ...]:
+    """The registered energies, in registration order (r-ring first)."""
+    return tuple(_ENERGIES)
+
+
+def energy_info(name: str) -> EnergyInfo:
+    """The registered energy ``name``, or a one-line InputError listing the others."""
+    info = _ENERGIES.get(name)
+    if info is None:
+        raise InputError(f"unknown energy '{name}' (use one of {', '.join(_ENERGIES)})")
+    return info
+
+
+def make_energy(name: str, graph: EdgeGraph, w: np.ndarray, weights_kind: str | None, *,
+                rings=1, perm: np.ndarray | None = None, **options) -> NeighbourhoodEnergy:
+    """Build the named local/global energy on ``graph`` (internal numbering).
+
+    ``rings`` is a checked int32 array (:func:`arapkit.arap.rings.check_rings`) in the caller's
+    numbering; ``perm`` (internal -> caller) maps it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from arapkit.arap.graph import EdgeGraph
+    >>> g = EdgeGraph(np.eye(3), np.array([[0, 1], [1, 2]]))
+    >>> make_energy("rring", g, np.ones(2), None, rings=np.ones(3, dtype=np.int32)).name
+    'rring'
+    """
+    info = energy_info(name)
+    unknown = sorted(set(options) - set(info.options))
+    if unknown:
+        raise InputError(f"energy '{name}' takes no option {unknown[0]!r}")
+    r = None
+    if info.rigidity_map:
+        r = np.asarray(rings, dtype=np.int32)
+        r = r if perm is None else r[perm]
+    elif not np.all(np.asarray(rings) == 1):
+        raise InputError(f"energy '{name}' has no rigidity map (rings must be 1)")
+    if info.needs_faces and graph.faces is None:
+        raise InputError(f"{graph.name}: energy '{name}' needs a triangle mesh")
+    return info.build(graph, w, weights_kind, r, perm, **options)

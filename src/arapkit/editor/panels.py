@@ -1,0 +1,297 @@
+"""The editor's side panel: its widgets, their callbacks, and keeping them in step.
+
+:class:`Panels` is the part of :class:`arapkit.editor.app.EditorApp` that builds the
+viser GUI (tools, handles, rigidity, view, solver, session), turns widget events into
+edits of the :class:`~arapkit.editor.state.EditorState`, and shows the state back in the
+widgets.  Every callback runs through :meth:`Panels.ui`: echoes of the page's own updates
+are skipped and bad input becomes a notification, never an exception in viser's loop.
+"""
+
+from __future__ import annotations
+
+import traceback
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import viser
+
+from arapkit.editor.files import MESH_SUFFIXES
+from arapkit.editor.geometry import UP_AXES
+from arapkit.editor.settings import SolverSettings, solver_choices
+from arapkit.editor.state import EditorState
+from arapkit.editor.tools import TOOLS, find_tool
+from arapkit.errors import InputError
+
+__all__ = ["MAX_R", "VIEWS", "Panels"]
+
+VIEWS = ("Shaded", "Rigidity r", "Energy")
+#: the largest r the sliders offer (a rings file may hold more)
+MAX_R = 10
+_FIRST_TOOL = "Select: click"
+
+
+class Panels:
+    """Widgets and their callbacks; a part of :class:`arapkit.editor.app.EditorApp`.
+
+    Uses the app's ``server``, ``state``, ``lock``, ``active``, ``export_dir``,
+    ``vertex_energy``, ``up_reason`` and its methods ``request_solve``, ``redraw``,
+    ``rebuild_display``, ``draw_markers``, ``aim_cameras``, ``status``.
+    """
+
+    server: Any
+    state: EditorState
+    lock: Any
+    active: str | None
+    export_dir: Path
+    vertex_energy: np.ndarray | None
+    up_reason: str
+    request_solve: Callable[[], int | None]
+    redraw: Callable[[], None]
+    rebuild_display: Callable[[], None]
+    draw_markers: Callable[[], None]
+    aim_cameras: Callable[[], None]
+    status: Callable[[str], None]
+
+    def build_panels(self) -> None:
+        """Create every widget and bind the panel's own callbacks."""
+        self._quiet = False
+        gui = self.server.gui
+        self.md_status = gui.add_markdown("Starting ...")
+        self.md_mesh = gui.add_markdown("")
+        self.md_settings = gui.add_markdown("")
+        with gui.add_folder("Tools"):
+            self.dd_tool = gui.add_dropdown("Tool", tuple(t.label for t in TOOLS),
+                                            initial_value=_FIRST_TOOL)
+            self.sl_radius = gui.add_slider("Radius (% size)", 0.5, 30.0, 0.5, 3.0)
+            gui.add_markdown("Click on the mesh to use the tool (Shift+click adds to the "
+                             "selection). Shift+drag: rectangle / brush stroke. Plain drag "
+                             "orbits.")
+            self.md_tool_help = gui.add_markdown(find_tool(_FIRST_TOOL).help)
+            self.md_selection = gui.add_markdown("Selected: **0** vertices")
+            self.bt_make = gui.add_button("Make handle from selection", icon=viser.Icon.PLUS)
+            self.bt_clear_sel = gui.add_button("Clear selection")
+        with gui.add_folder("Handles"):
+            self.dd_handle = gui.add_dropdown("Handle", ("(none)",))
+            self.tx_name = gui.add_text("Name", "")
+            self.bt_rename = gui.add_button("Rename")
+            self.cb_frozen = gui.add_checkbox("Frozen (fixed)", False)
+            self.bt_reset = gui.add_button("Reset pose")
+            self.bt_remove = gui.add_button("Remove handle", color="red")
+        with gui.add_folder("Rigidity"):
+            self.sl_global = gui.add_slider("Global r", 1, MAX_R, 1, 1)
+            self.sl_paint = gui.add_slider("Paint r", 1, MAX_R, 1, 3)
+            self.up_rings = gui.add_upload_button("Load rings file", icon=viser.Icon.UPLOAD)
+        with gui.add_folder("View"):
+            self.dd_view = gui.add_dropdown("Colour", VIEWS, initial_value="Shaded")
+            self.dd_up = gui.add_dropdown("Up axis", tuple(UP_AXES), initial_value="+z")
+            self.cb_show_handles = gui.add_checkbox("Highlight handles", True)
+            self.html_legend = gui.add_html("")
+        with gui.add_folder("Solver"):
+            self._build_solver_panel(gui)
+        with gui.add_folder("Session"):
+            self.bt_undo = gui.add_button("Undo", icon=viser.Icon.ARROW_BACK_UP)
+            self.bt_redo = gui.add_button("Redo", icon=viser.Icon.ARROW_FORWARD_UP)
+            self.bt_save = gui.add_button("Save session")
+            self.up_session = gui.add_upload_button("Load session", mime_type=".json")
+            self.bt_export = gui.add_button("Export mesh + rings", icon=viser.Icon.DOWNLOAD)
+            self.up_mesh = gui.add_upload_button(
+                "Open mesh", mime_type=",".join(MESH_SUFFIXES) + ",.gz", icon=viser.Icon.UPLOAD)
+            gui.add_markdown(f"Exports and sessions go to `{self.export_dir}`.")
+        self._bind_panel_events()
+
+    def _build_solver_panel(self, gui: Any) -> None:
+        from arapkit.mesh.weights import WEIGHT_KINDS
+
+        s = self.state.settings
+        self.dd_method = gui.add_dropdown("Method", tuple(c.label for c in solver_choices()))
+        self.dd_weights = gui.add_dropdown("Weights", WEIGHT_KINDS, initial_value=s.weights)
+        self.nb_tol = gui.add_number("Tolerance", s.tol, min=1e-9, max=0.5, step=1e-6)
+        self.nb_maxit = gui.add_number("Max iterations", s.max_iter, min=1, max=100000, step=1)
+        self.nb_budget = gui.add_number("Live budget (ms)", s.live_budget_ms, min=1.0,
+                                        max=5000.0, step=1.0)
+        self.bt_solve = gui.add_button("Solve again")
+
+    # ---------------------------------------------------------------- callback plumbing
+    def ui(self, fn: Callable[[Any], None]) -> Callable[[Any], None]:
+        """Wrap a GUI callback: skip echoes of our own updates, report bad input."""
+
+        def wrapped(event: Any) -> None:
+            if self._quiet:
+                return
+            try:
+                with self.lock:
+                    fn(event)
+            except InputError as exc:
+                self.notify(event, "Cannot do that", str(exc), error=True)
+            except Exception as exc:  # a bug, not the user's fault: say so in the page too
+                traceback.print_exc()
+                self.notify(event, "Internal error",
+                            f"{type(exc).__name__}: {exc} (please report this)", error=True)
+
+        return wrapped
+
+    def notify(self, event: Any, title: str, body: str, error: bool = False) -> None:
+        """A notification for the event's page (all pages when it has none)."""
+        client = getattr(event, "client", None)
+        targets = [client] if client is not None else list(self.server.get_clients().values())
+        for c in targets:
+            c.add_notification(title, body, auto_close_seconds=8.0,
+                               color="red" if error else "green")
+        if error:
+            self.status(f"⚠ {body}")
+
+    def quietly(self, fn: Callable[[], None]) -> None:
+        """Run ``fn`` with the widget callbacks muted (setting values, not user actions)."""
+        # Assigning a widget value runs its callbacks; these are not user actions.
+        old, self._quiet = self._quiet, True
+        try:
+            fn()
+        finally:
+            self._quiet = old
+
+    def _bind_panel_events(self) -> None:
+        ui = self.ui
+        self.bt_make.on_click(ui(lambda e: self._make_handle()))
+        self.bt_clear_sel.on_click(ui(lambda e: self._clear_selection()))
+        self.dd_handle.on_update(ui(lambda e: self._select_handle(self.dd_handle.value)))
+        self.bt_rename.on_click(ui(lambda e: self._rename()))
+        self.cb_frozen.on_update(ui(lambda e: self._freeze(self.cb_frozen.value)))
+        self.bt_reset.on_click(ui(lambda e: self._reset_pose()))
+        self.bt_remove.on_click(ui(lambda e: self._remove_handle()))
+        self.sl_global.on_update(ui(lambda e: self._set_global(self.sl_global.value)))
+        self.dd_view.on_update(ui(lambda e: (self.rebuild_display(), self.show_settings())))
+        self.cb_show_handles.on_update(ui(lambda e: self.draw_markers()))
+        self.dd_up.on_update(ui(lambda e: self._up_chosen()))
+        for w in (self.dd_method, self.dd_weights, self.nb_tol, self.nb_maxit, self.nb_budget):
+            w.on_update(ui(lambda e: self._apply_settings()))
+        self.bt_solve.on_click(ui(lambda e: self.request_solve()))
+        self.bt_undo.on_click(ui(lambda e: self._history(self.state.undo)))
+        self.bt_redo.on_click(ui(lambda e: self._history(self.state.redo)))
+
+    # ---------------------------------------------------------------- state -> widgets
+    def show_settings(self) -> None:
+        """One line in the panel: what the page shows and how it solves, at a glance."""
+        if not hasattr(self, "md_settings"):
+            return
+        s = self.state.settings
+        why = f" ({self.up_reason})" if self.up_reason else ""
+        self.md_settings.content = (
+            f"View **{self.dd_view.value}**, up **{self.dd_up.value}**{why} · "
+            f"method **{s.label}** · weights **{s.weights}**"
+        )
+
+    def sync_gui_from_state(self) -> None:
+        """Show the state's global r, solver settings and handles in the widgets."""
+        st = self.state
+        values, counts = np.unique(st.rings, return_counts=True)
+        self.sl_global.value = int(min(values[np.argmax(counts)], MAX_R))
+        s = st.settings
+        self.dd_method.value = s.label
+        self.dd_weights.value = s.weights
+        self.nb_tol.value, self.nb_maxit.value = s.tol, s.max_iter
+        self.nb_budget.value = s.live_budget_ms
+        self.sync_handle_widgets()
+
+    def sync_handle_widgets(self) -> None:
+        """Show the active handle (the last one when it is gone) in the handle widgets."""
+        names = [h.name for h in self.state.handles]
+        if self.active not in names:
+            self.active = names[-1] if names else None
+        self.dd_handle.options = tuple(names) or ("(none)",)
+        self.dd_handle.value = self.active or "(none)"
+        h = self.state.handle(self.active) if self.active else None
+        self.tx_name.value = h.name if h else ""
+        self.cb_frozen.value = bool(h and h.frozen)
+
+    def sync_history(self) -> None:
+        """Enable undo / redo as far as there is something to undo / redo."""
+        self.bt_undo.disabled = not self.state.can_undo
+        self.bt_redo.disabled = not self.state.can_redo
+
+    def after_edit(self, solve: bool = True) -> None:
+        """Refresh everything after an edit of handles or rings (not a drag)."""
+        self.quietly(self.sync_gui_from_state)
+        self.redraw()
+        if solve:
+            self.request_solve()
+
+    # ---------------------------------------------------------------- widget actions
+    def _make_handle(self) -> None:
+        h = self.state.add_handle()
+        self.active = h.name
+        self.after_edit()
+
+    def _clear_selection(self) -> None:
+        self.state.clear_selection()
+        self.draw_markers()
+
+    def _select_handle(self, name: str) -> None:
+        if name == "(none)":
+            return
+        self.active = name
+        self.quietly(self.sync_handle_widgets)
+        self.draw_markers()
+
+    def _rename(self) -> None:
+        if self.active is None:
+            raise InputError("rename: no handle selected")
+        self.state.rename_handle(self.active, self.tx_name.value)
+        self.active = self.tx_name.value.strip()
+        self.after_edit(solve=False)
+
+    def _freeze(self, frozen: bool) -> None:
+        if self.active is None:
+            return
+        self.state.set_frozen(self.active, frozen)
+        self.after_edit(solve=False)
+
+    def _reset_pose(self) -> None:
+        if self.active is None:
+            return
+        h = self.state.handle(self.active)
+        if self.state.move_handle(h.name, (1.0, 0.0, 0.0, 0.0), h.pivot):
+            self.after_edit()
+
+    def _remove_handle(self) -> None:
+        if self.active is None:
+            raise InputError("remove: no handle selected")
+        self.state.remove_handle(self.active)
+        self.active = None
+        self.after_edit()
+
+    def _set_global(self, r: int) -> None:
+        if np.all(self.state.rings == r):
+            return
+        self.state.set_global_rings(int(r))
+        self.after_edit()
+
+    def _apply_settings(self) -> None:
+        label = self.dd_method.value
+        choice = next((c for c in solver_choices() if c.label == label), None)
+        old = self.state.settings
+        # the page's values pass the same rules as a session's (a client can send anything)
+        s = SolverSettings.from_dict({
+            **old.to_dict(),
+            "method": label if choice is None else choice.method,
+            "volumetric": choice is not None and choice.volumetric,
+            "weights": self.dd_weights.value,
+            "tol": self.nb_tol.value,
+            "max_iter": self.nb_maxit.value,
+            "live_budget_ms": self.nb_budget.value,
+        })
+        self.state.settings = s
+        if (s.method, s.volumetric) != (old.method, old.volumetric):
+            self.vertex_energy = None  # another method's energy: not shown as this one's
+        self.show_settings()
+        self.request_solve()
+
+    def _up_chosen(self) -> None:
+        """The user picked an up axis in the panel: it holds until the next mesh loads."""
+        self.up_reason = "chosen in the panel"
+        self.aim_cameras()
+
+    def _history(self, step: Callable[[], bool]) -> None:
+        if step():
+            self.after_edit()

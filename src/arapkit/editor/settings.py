@@ -1,0 +1,144 @@
+"""The editor's solver panel: which methods it offers, and what the user chose there.
+
+The methods, their labels and what each accepts (a rigidity map, a volumetric form) are
+read from :mod:`arapkit.methods.registry`, so a method registered for the ``"editor"``
+door appears in the panel without a change here.  Volumetric ARAP is not a method of its
+own: it is a method whose registration says ``volumetric=True``, run on the
+tetrahedralised inside, and the selector offers it as one more entry.
+
+Examples
+--------
+>>> [c.method for c in solver_choices()][:2]
+['rring', 'spokes-and-rims']
+>>> s = SolverSettings(method="volumetric")  # the name of arapkit 0.1's sessions
+>>> s.method, s.volumetric, s.label
+('rring', True, 'volumetric r-ring ARAP')
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+from typing import Any
+
+from arapkit import validate
+from arapkit.errors import InputError
+from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.methods.registry import MethodInfo, method, method_names, methods
+
+__all__ = ["METHODS", "SolverChoice", "SolverSettings", "solver_choices"]
+
+#: the methods the editor offers, by their one name (the registry's order)
+METHODS = method_names("editor")
+#: sessions of arapkit 0.1 named volumetric ARAP as a method of its own: (method, volumetric)
+_OLD_SELECTIONS = {"volumetric": ("rring", True)}
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverChoice:
+    """One entry of the method selector: a method, on the surface or on the volume.
+
+    Examples
+    --------
+    >>> SolverChoice("SR-ARAP", "sr-arap").volumetric
+    False
+    """
+
+    label: str
+    method: str
+    volumetric: bool = False
+
+
+def solver_choices() -> tuple[SolverChoice, ...]:
+    """The selector's entries: every editor method, then the volumetric form of those with one.
+
+    Examples
+    --------
+    >>> [c.label for c in solver_choices() if c.volumetric]
+    ['volumetric r-ring ARAP']
+    """
+    offered = methods("editor")
+    return (*(SolverChoice(m.label, m.name) for m in offered),
+            *(SolverChoice(f"volumetric {m.label}", m.name, True) for m in offered
+              if m.volumetric))
+
+
+@dataclasses.dataclass
+class SolverSettings:
+    """What the user chose in the solver panel.
+
+    ``method`` is a name of :mod:`arapkit.methods.registry` (older names such as
+    ``"arap"`` and ``"volumetric"`` are translated on construction); ``volumetric`` runs
+    it on the tetrahedralised inside.  ``live_budget_ms`` and ``live_max_iter`` bound the
+    work before the first update of a drag is sent; the solve then continues to ``tol`` /
+    ``max_iter`` unless a newer drag supersedes it.
+
+    Examples
+    --------
+    >>> SolverSettings(method="arap").method
+    'rring'
+    """
+
+    method: str = "rring"
+    weights: str = DEFAULT_WEIGHTS
+    tol: float = 1e-3
+    max_iter: int = 200
+    live_max_iter: int = 8
+    live_budget_ms: float = 60.0
+    volumetric: bool = False
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.method, str):
+            return  # refused by from_dict, which names the field
+        if self.method in _OLD_SELECTIONS:
+            self.method, self.volumetric = _OLD_SELECTIONS[self.method]
+        # an alias becomes the one name; an unknown name stays for from_dict to refuse
+        with contextlib.suppress(InputError):
+            self.method = method(self.method).name
+
+    @property
+    def info(self) -> MethodInfo:
+        """The registry's entry for :attr:`method` (what it accepts)."""
+        return method(self.method, "editor")
+
+    @property
+    def label(self) -> str:
+        """What the selector shows for these settings."""
+        return next((c.label for c in solver_choices()
+                     if (c.method, c.volumetric) == (self.method, self.volumetric)),
+                    self.method)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> SolverSettings:
+        """Settings from a session's ``solver`` object, each field checked.
+
+        Examples
+        --------
+        >>> SolverSettings.from_dict({"tol": 1e-4}).tol
+        0.0001
+        >>> SolverSettings.from_dict({"method": "arap"}).method
+        'rring'
+        """
+        known = [f.name for f in dataclasses.fields(cls)]
+        validate.keys_of(d, known, "session solver")
+        s = cls(**d)
+        if not isinstance(s.method, str) or s.method not in METHODS:
+            raise InputError(f"session solver: method {s.method!r:.40}: expected one of "
+                             f"{', '.join(METHODS)}")
+        if not isinstance(s.volumetric, bool):
+            raise InputError(f"session solver: volumetric must be true or false, got "
+                             f"{s.volumetric!r:.40}")
+        if s.volumetric and not s.info.volumetric:
+            raise InputError(f"session solver: method {s.method!r} has no volumetric form")
+        if not isinstance(s.weights, str) or s.weights not in WEIGHT_KINDS:
+            raise InputError(f"session solver: weights {s.weights!r:.40}: expected one of "
+                             f"{', '.join(WEIGHT_KINDS)}")
+        s.tol = validate.tolerance(s.tol, "session solver: tol")
+        s.max_iter = validate.iteration_cap(s.max_iter, "session solver: max_iter")
+        s.live_max_iter = validate.iteration_cap(s.live_max_iter, "session solver: live_max_iter")
+        s.live_budget_ms = validate.number(s.live_budget_ms, "session solver: live_budget_ms",
+                                           lo=0.0, hi=3.6e6)
+        return s

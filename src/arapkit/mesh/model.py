@@ -1,0 +1,437 @@
+"""Triangle mesh model: validation, cached topology, and the number range and scale rules.
+
+Files are read by :func:`arapkit.io.readers.load_mesh`. A :class:`Mesh` keeps the vertex
+order of its source exactly (handles and rigidity maps refer to vertex indices), repairs
+what it can while saying so in :attr:`Mesh.notes`, and raises
+:class:`~arapkit.errors.InputError` with a one-line message for what it cannot.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from ..errors import InputError
+from ..validate import real_array
+from .attributes import MeshAttributes
+
+__all__ = [
+    "COORDINATE_RANGE",
+    "EdgeTopology",
+    "Mesh",
+    "bounding_box_diagonal",
+    "check_number_range",
+    "extent",
+    "scale_free_vertices",
+]
+
+#: Coordinates (and the mesh's extent) inside ``[1/COORDINATE_RANGE, COORDINATE_RANGE]``
+#: keep every squared length and area of the solver a normal double.
+COORDINATE_RANGE = 1e150
+
+
+def check_number_range(vertices: np.ndarray, name: str = "mesh") -> None:
+    """Refuse coordinates whose squares would overflow or underflow a double.
+
+    Loading and validation work at any finite scale (they normalise first), but the
+    solver squares lengths: a coordinate beyond ``COORDINATE_RANGE`` (1e150) in size, or
+    a mesh smaller than its inverse, is outside the numbers it can represent.
+
+    Raises
+    ------
+    InputError
+        Naming ``name``, the size found and the range.
+
+    Examples
+    --------
+    >>> check_number_range(np.array([[0.0, 0, 0], [1e200, 0, 0]]), "big.off")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: big.off: coordinates reach 1e+200, beyond the number range ...
+    """
+    V = np.asarray(vertices, dtype=np.float64)
+    big = float(np.max(np.abs(V))) if V.size else 0.0
+    size = float(np.max(extent(V))) if V.size else 0.0
+    lo, hi = 1.0 / COORDINATE_RANGE, COORDINATE_RANGE
+    rng = f"(sizes from {lo:.0e} to {hi:.0e}; squared lengths overflow above about 1e154)"
+    if big > hi:
+        raise InputError(
+            f"{name}: coordinates reach {big:.3g}, beyond the number range arapkit "
+            f"computes in {rng}; rescale the mesh"
+        )
+    if 0 < size < lo:
+        raise InputError(
+            f"{name}: the mesh is only {size:.3g} across, below the number range arapkit "
+            f"computes in {rng}; rescale the mesh"
+        )
+
+
+def extent(vertices: np.ndarray) -> np.ndarray:
+    """Per-axis extent (max - min) computed without overflow (ptp of ±1e308 is inf).
+
+    Examples
+    --------
+    >>> extent(np.array([[-1e308, 0, 0], [1e307, 1, 0]])).tolist()
+    [1.1e+308, 1.0, 0.0]
+    """
+    V = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    if len(V) == 0:
+        return np.zeros(3)
+    hi, lo = V.max(axis=0), V.min(axis=0)
+    return 2.0 * (0.5 * hi - 0.5 * lo)
+
+
+def scale_free_vertices(vertices: np.ndarray) -> np.ndarray:
+    """The vertices moved and rescaled by powers of two to about unit size.
+
+    Angles, cotangents and relative tolerances are the same as the input's, and no
+    squared quantity over- or underflows, whatever the input's units.
+
+    Examples
+    --------
+    >>> scale_free_vertices(np.array([[0.0, 0, 0], [3e200, 0, 0]])).tolist()
+    [[0.0, 0.0, 0.0], [0.9798151324726952, 0.0, 0.0]]
+    """
+    return _normalised(np.asarray(vertices, dtype=np.float64))[0]
+
+
+def bounding_box_diagonal(vertices: np.ndarray) -> float:
+    """Length of the bounding-box diagonal (a shape's scale), computed without overflow.
+
+    The one definition of "the diagonal": :attr:`Mesh.bounding_box_diagonal`, weld
+    tolerances, step tolerances and augmentation radii all use it.
+
+    Examples
+    --------
+    >>> bounding_box_diagonal(np.array([[0.0, 0, 0], [3, 4, 0]]))
+    5.0
+    >>> bounding_box_diagonal(np.array([[0.0, 0, 0], [3e300, 4e300, 0]]))
+    5e+300
+    """
+    W, factor = _normalised(np.asarray(vertices, dtype=np.float64).reshape(-1, 3))
+    return float(np.linalg.norm(np.ptp(W, axis=0))) * factor if len(W) else 0.0
+
+
+def _normalised(V: np.ndarray) -> tuple[np.ndarray, float]:
+    """Coordinates rescaled by powers of two (exact) to about unit size, and the factor.
+
+    The translation to the minimum corner keeps far-from-origin meshes accurate; all
+    squared quantities of the result lie near 1, so no tolerance over- or underflows.
+    """
+    big = float(np.max(np.abs(V))) if V.size else 0.0
+    if big == 0.0:
+        return np.zeros_like(V), 1.0
+    e1 = np.frexp(big)[1]
+    W = np.ldexp(V, -e1)
+    W = W - W.min(axis=0)
+    ext = float(np.max(W))
+    if ext == 0.0:
+        return W, 1.0
+    e2 = np.frexp(ext)[1]
+    return np.ldexp(W, -e2), float(np.ldexp(1.0, e1 + e2))
+
+
+def _fan_triangulate(polygons: list[list[int]]) -> tuple[np.ndarray, int]:
+    """Split polygons into triangle fans; return triangles and how many polygons were split."""
+    tris: list[tuple[int, int, int]] = []
+    split = 0
+    for poly in polygons:
+        if len(poly) > 3:
+            split += 1
+        for t in range(1, len(poly) - 1):
+            tris.append((poly[0], poly[t], poly[t + 1]))
+    return np.asarray(tris, dtype=np.int64).reshape(-1, 3), split
+
+
+class EdgeTopology:
+    """Vertex adjacency and connected components of anything with ``n_vertices`` and
+    ``edges`` (a :class:`Mesh`, or the solver's :class:`arapkit.arap.problem.EdgeGraph`).
+
+    Examples
+    --------
+    >>> Mesh(np.eye(3), [[0, 1, 2]]).n_components
+    1
+    """
+
+    @cached_property
+    def adjacency(self) -> sp.csr_matrix:
+        """Symmetric vertex adjacency matrix (CSR, ones on edges)."""
+        E = self.edges
+        n = self.n_vertices
+        A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+        return (A + A.T).tocsr()
+
+    @cached_property
+    def _components(self) -> tuple[int, np.ndarray]:
+        return connected_components(self.adjacency, directed=False)
+
+    @property
+    def n_components(self) -> int:
+        """Number of connected components (an isolated vertex is its own)."""
+        return int(self._components[0])
+
+    @property
+    def component_labels(self) -> np.ndarray:
+        """Connected-component label of each vertex."""
+        return self._components[1]
+
+
+class Mesh(EdgeTopology):
+    """A validated triangle mesh.
+
+    Parameters
+    ----------
+    vertices : (n, 3) array_like of float
+        Vertex positions. Must be finite.
+    faces : (m, 3) array_like of int, or a list of polygons
+        Vertex indices per face. Polygons with more than three corners are split
+        into triangle fans (and :attr:`notes` says so).
+    name : str, optional
+        Used in messages (usually the file name).
+
+    Notes
+    -----
+    Validation policy (each repair is recorded in :attr:`notes`):
+
+    * non-finite coordinates, out-of-range indices, faces with fewer than three
+      corners and meshes without faces raise :class:`InputError`;
+    * polygons are fan-triangulated;
+    * faces that repeat a vertex, repeated faces (same vertex set) and faces of
+      zero area are dropped, because their cotangent weights are undefined;
+    * vertices referenced by no face are kept and stay fixed during deformation.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> m = Mesh(np.eye(3), [[0, 1, 2]], name="tri")
+    >>> m.n_vertices, m.n_faces, len(m.edges)
+    (3, 1, 3)
+    """
+
+    def __init__(
+        self,
+        vertices,
+        faces,
+        name: str = "mesh",
+        attributes: MeshAttributes | None = None,
+    ) -> None:
+        self.name = str(name)
+        self.notes: list[str] = []
+        #: faces dropped by validation, by reason ("repeated_vertex", "zero_area", "duplicate")
+        self.dropped_faces: dict[str, int] = {}
+        #: what the source file carried besides positions and triangles (set by the loader)
+        self.attributes = attributes
+        #: for a mesh made by :func:`weld`: the input mesh and each input vertex's vertex here
+        self.welded_from = None
+        self.vertices = self._check_vertices(vertices)
+        self.faces = self._check_faces(faces)
+        self.vertices.setflags(write=False)
+        self.faces.setflags(write=False)
+
+    # -- validation -------------------------------------------------------
+    def _check_vertices(self, vertices) -> np.ndarray:
+        # one rule for every entry point: text, objects, complex numbers and booleans are
+        # refused (numpy would parse strings and drop imaginary parts without a word)
+        V = np.array(real_array(vertices, f"{self.name}: vertices"), dtype=np.float64)
+        if V.ndim != 2 or V.shape[1] != 3:
+            raise InputError(f"{self.name}: vertices must have shape (n, 3), got {V.shape}")
+        if len(V) == 0:
+            raise InputError(f"{self.name}: mesh has no vertices")
+        bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
+        if len(bad):
+            raise InputError(
+                f"{self.name}: vertex {bad[0]} has a non-finite coordinate {V[bad[0]].tolist()}"
+                + (f" ({len(bad)} such vertices)" if len(bad) > 1 else "")
+            )
+        return V
+
+    def _check_faces(self, faces) -> np.ndarray:
+        n = len(self.vertices)
+        if not hasattr(faces, "__len__") or isinstance(faces, (str, bytes)):
+            raise InputError(f"{self.name}: faces must be an (m, 3) array or a list of polygons")
+        if isinstance(faces, np.ndarray) and faces.dtype != object and faces.ndim != 2:
+            raise InputError(
+                f"{self.name}: faces must be an (m, 3) array or a list of polygons, "
+                f"got an array of shape {faces.shape}"
+            )
+        if len(faces) == 0:
+            raise InputError(f"{self.name}: mesh has no faces")
+        if not isinstance(faces, np.ndarray) and len(faces) and all(len(f) == 3 for f in faces):
+            faces = np.asarray(faces)
+        if isinstance(faces, np.ndarray) and faces.ndim == 2:
+            polys = None
+            F = faces
+        else:
+            polys = [list(f) for f in faces]
+            lengths = {len(p) for p in polys}
+            F = np.asarray(polys) if lengths <= {3} else None
+        if F is None or F.shape[1] != 3:
+            polys = [list(f) for f in (polys if polys is not None else F.tolist())]
+            short = [i for i, p in enumerate(polys) if len(p) < 3]
+            if short:
+                raise InputError(
+                    f"{self.name}: face {short[0]} has {len(polys[short[0]])} corners "
+                    "(need at least 3)"
+                )
+            flat = real_array([i for p in polys for i in p], f"{self.name}: faces")
+            if flat.dtype.kind == "f" and (
+                    not np.isfinite(flat).all() or (flat != np.round(flat)).any()
+                    or (np.abs(flat) >= 2.0**62).any()):
+                raise InputError(f"{self.name}: face indices must be integers in 0..{n - 1}")
+            F, split = _fan_triangulate(polys)
+            if split:
+                self.notes.append(
+                    f"{split} polygon(s) with more than 3 corners were split into triangles"
+                )
+        if len(F) == 0:
+            raise InputError(f"{self.name}: mesh has no faces")
+        if not np.issubdtype(np.asarray(F).dtype, np.integer):
+            Ff = real_array(F, f"{self.name}: faces")
+            if not np.all(np.isfinite(Ff)) or np.any(Ff != np.round(Ff)):
+                raise InputError(f"{self.name}: face indices must be integers")
+            # beyond int64 (e.g. 1e23): out of range whatever the mesh, and no overflow
+            huge = np.abs(Ff) >= 2.0**62
+            if huge.any():
+                f = int(np.argmax(huge.any(axis=1)))
+                raise InputError(f"{self.name}: face {f} references vertex "
+                                 f"{Ff[f][huge[f]][0]:.3g} but the mesh has {n} vertices")
+        try:
+            F = np.asarray(F, dtype=np.int64)
+        except OverflowError:
+            # Python ints beyond int64 (an index like 10**23): find the face to name it
+            big = next(i for i, f in enumerate(np.asarray(F, dtype=object).tolist())
+                       if any(abs(int(v)) >= 2**63 for v in f))
+            raise InputError(
+                f"{self.name}: face {big} references a vertex index too large for any "
+                f"mesh (the mesh has {n} vertices)"
+            ) from None
+        out = np.flatnonzero(((F < 0) | (F >= n)).any(axis=1))
+        if len(out):
+            f = out[0]
+            raise InputError(
+                f"{self.name}: face {f} references vertex {F[f][(F[f] < 0) | (F[f] >= n)][0]} "
+                f"but the mesh has {n} vertices (indices 0..{n - 1})"
+            )
+        return self._drop_degenerate(F)
+
+    def _drop_degenerate(self, F: np.ndarray) -> np.ndarray:
+        repeated_vertex = (F[:, 0] == F[:, 1]) | (F[:, 1] == F[:, 2]) | (F[:, 0] == F[:, 2])
+        V = self.vertices
+        # Areas of the mesh rescaled (exactly, by powers of two) to unit size: the relative
+        # threshold then means the same at 1e-300 and 1e300, and nothing overflows.
+        W, _ = _normalised(V)
+        cross = np.cross(W[F[:, 1]] - W[F[:, 0]], W[F[:, 2]] - W[F[:, 0]])
+        dbl_area = np.linalg.norm(cross, axis=1)
+        scale = float(np.max(np.ptp(W, axis=0))) if len(W) > 1 else 1.0
+        zero_area = (dbl_area <= 1e-14 * scale**2) & ~repeated_vertex
+        key = np.sort(F, axis=1)
+        order = np.lexsort((key[:, 2], key[:, 1], key[:, 0]))
+        same = np.all(key[order[1:]] == key[order[:-1]], axis=1)
+        duplicate = np.zeros(len(F), dtype=bool)
+        # lexsort is stable: within a run of equal faces the earliest comes first and stays
+        duplicate[order[1:][same]] = True
+        duplicate &= ~repeated_vertex & ~zero_area
+        for mask, what, key in (
+            (repeated_vertex, "repeat a vertex", "repeated_vertex"),
+            (zero_area, "have zero area", "zero_area"),
+            (duplicate, "repeat an earlier face", "duplicate"),
+        ):
+            self.dropped_faces[key] = int(mask.sum())
+            if mask.any():
+                idx = np.flatnonzero(mask)
+                self.notes.append(
+                    f"dropped {len(idx)} face(s) that {what} (first: face {idx[0]})"
+                )
+        keep = ~(repeated_vertex | zero_area | duplicate)
+        if not keep.any():
+            raise InputError(f"{self.name}: every face is degenerate (zero area or repeated)")
+        F = np.ascontiguousarray(F[keep])
+        unref = np.setdiff1d(np.arange(len(V)), F.ravel())
+        if len(unref):
+            self.notes.append(
+                f"{len(unref)} vertex/vertices referenced by no face (first: vertex {unref[0]}) "
+                "are kept and stay fixed"
+            )
+        return F
+
+    # -- cached topology ----------------------------------------------------
+    @property
+    def n_vertices(self) -> int:
+        """Number of vertices."""
+        return len(self.vertices)
+
+    @property
+    def n_faces(self) -> int:
+        """Number of triangles (after repairs)."""
+        return len(self.faces)
+
+    @cached_property
+    def _half_edges(self) -> np.ndarray:
+        F = self.faces
+        return np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+
+    @cached_property
+    def _edge_keys(self) -> tuple[np.ndarray, np.ndarray]:
+        """Sorted unique keys ``i * n + j`` (i < j) and the edge id of every half edge."""
+        he = self._half_edges
+        n = np.int64(self.n_vertices)
+        keys = np.minimum(he[:, 0], he[:, 1]) * n + np.maximum(he[:, 0], he[:, 1])
+        ukeys, inverse = np.unique(keys, return_inverse=True)
+        return ukeys, inverse
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """Unique undirected edges ``(i, j)`` with ``i < j``, sorted lexicographically."""
+        ukeys = self._edge_keys[0]
+        n = self.n_vertices
+        return np.stack([ukeys // n, ukeys % n], axis=1)
+
+    @property
+    def face_edges(self) -> np.ndarray:
+        """(m, 3) id in :attr:`edges` of edge ``(F[f, c], F[f, c+1])`` of each face."""
+        return self._edge_keys[1].reshape(3, -1).T
+
+    @cached_property
+    def edge_face_counts(self) -> np.ndarray:
+        """Number of faces on each edge of :attr:`edges` (1 = boundary, >2 = non-manifold)."""
+        ukeys, inverse = self._edge_keys
+        return np.bincount(inverse, minlength=len(ukeys))
+
+    @cached_property
+    def unreferenced(self) -> np.ndarray:
+        """Indices of vertices that no face uses."""
+        used = np.zeros(self.n_vertices, dtype=bool)
+        used[self.faces.ravel()] = True
+        return np.flatnonzero(~used)
+
+    @cached_property
+    def boundary_loops(self) -> list[np.ndarray]:
+        """Vertex sets of the boundary curves (components of the boundary-edge graph)."""
+        B = self.edges[self.edge_face_counts == 1]
+        if len(B) == 0:
+            return []
+        verts, inv = np.unique(B.ravel(), return_inverse=True)
+        inv = inv.reshape(-1, 2)
+        g = sp.coo_matrix((np.ones(len(B)), (inv[:, 0], inv[:, 1])), shape=(len(verts),) * 2)
+        k, lab = connected_components(g, directed=False)
+        return [verts[lab == c] for c in range(k)]
+
+    @property
+    def n_nonmanifold_edges(self) -> int:
+        """Edges shared by more than two faces."""
+        return int(np.count_nonzero(self.edge_face_counts > 2))
+
+    @cached_property
+    def bounding_box_diagonal(self) -> float:
+        """Length of the bounding-box diagonal (the mesh's scale): :func:`bounding_box_diagonal`."""
+        return bounding_box_diagonal(self.vertices)
+
+    def check_number_range(self) -> None:
+        """:func:`check_number_range` on this mesh's vertices (message names the mesh)."""
+        check_number_range(self.vertices, self.name)
+
+    def __repr__(self) -> str:
+        return f"Mesh({self.name!r}, {self.n_vertices} vertices, {self.n_faces} faces)"

@@ -1,0 +1,506 @@
+"""r-ring ARAP deformation: local/global iterations with one reused Cholesky factor.
+
+Energy (Chen et al. 2017, eq. 1)::
+
+    E(p', R) = sum_k sum_{e=(i,j) in N(k, r_k)} w_e |(p'_i - p'_j) - R_k (p_i - p_j)|^2
+
+Global step (derived from eq. 1 itself; the paper's eq. 5 has a stray factor 2). Setting
+dE/dp'_i = 0 gives, with d_e the number of neighbourhoods that contain edge e,
+
+    sum_{j~i} d_ij w_ij (p'_i - p'_j) = sum_k R_k c_ki,
+
+i.e. ``A p' = b`` with ``A`` the Laplacian of the edge weights ``d_e w_e``. For r = 1,
+d_e = 2 and this is Sorkine & Alexa's ``sum_j w_ij (p'_i - p'_j) =
+sum_j w_ij / 2 (R_i + R_j)(p_i - p_j)`` times 2. Handles (and vertices of components without
+a handle) are eliminated, so the reduced matrix is symmetric positive definite; it is
+factorised once per handle set and reused for every iteration and every new set of targets.
+
+Local step: ``R_k = argmax_R tr(R S_k)`` with ``S_k = sum_e w_e e_e e'_e^T`` (see
+:mod:`arapkit.arap.rotations`). Each step minimises E exactly over its block of unknowns, so the
+energy never increases.
+
+Layout
+------
+:class:`Deformer` is the friendly wrapper over four parts, each replaceable on its own:
+the immutable precomputed problem (:mod:`arapkit.arap.problem`), the energy's structure
+(:mod:`arapkit.arap.energies.base` and one module per further energy), the backend with the compiled
+kernels (:mod:`arapkit.arap.backends.cpu`) and the local/global loop (:mod:`arapkit.arap.loop`).
+Constraints and the Cholesky factor are in :mod:`arapkit.arap.constraints`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from ..arap.backends import DEVICES, check_device, make_backend  # noqa: F401 - DEVICES: what device= takes
+from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
+from ..arap.energies import energy_info
+from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
+from ..arap.graph import bandwidth_order, unit_scale
+from ..arap.loop import Result, local_global
+from ..arap.problem import ARAPProblem
+from ..arap.rings import Neighbourhoods
+from ..errors import Advice, InputError
+from ..mesh.model import Mesh
+from ..mesh.weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
+from ..validate import integer, iteration_cap, real_array, tolerance
+from .registry import INTERFACES, MethodInfo, MethodOption, method, method_names, methods, register
+
+__all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
+           "bandwidth_order", "check_method", "register_variant", "unit_scale"]
+
+INITS = ("identity", "laplacian")
+
+
+def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
+    """A method of the local/global loop: what its energy's form fixes comes from the energy.
+
+    Anderson acceleration keeps an extrapolation only when it lowers the energy, a safeguard
+    that holds for descent methods alone.
+    """
+    en = energy_info(name)
+    return MethodInfo(name, label, local_global=True, descent=en.descent,
+                      rigidity_map=en.rigidity_map, accelerate=en.descent, **kw)
+
+
+register(_local_global_method("rring", "r-ring ARAP", volumetric=True))
+# compare runs the paper's comparison set, which has no spokes-and-rims
+register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP",
+                              interfaces=frozenset(INTERFACES) - {"compare"}))
+register(_local_global_method(
+    "sr-arap", "SR-ARAP",
+    # sr_roi's vertex ids are checked where the mesh is known (make_energy)
+    options={"sr_alpha": MethodOption("alpha", DEFAULT_ALPHA, check_alpha, "alpha = {:g}"),
+             "sr_roi": MethodOption("roi", None, lambda roi: roi)},
+    interfaces=frozenset(INTERFACES) - {"torch"},
+    why_not={"torch": "its rotation coupling has no per-step fixed point"}))
+
+
+def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None) -> dict:
+    """Validate a method name and its options; return the method's options.
+
+    Examples
+    --------
+    >>> check_method("sr-arap", "0.1")
+    {'alpha': 0.1}
+    """
+    names = method_names("library")
+    if energy not in names:
+        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(names)})")
+    info = method(energy)
+    given = {"sr_alpha": sr_alpha, "nodes": nodes, "sr_roi": sr_roi}
+    for name, value in given.items():
+        if value is not None and name not in info.options:
+            owner = next(m.name for m in methods("library") if name in m.options)
+            raise InputError(f"{name} is an option of energy '{owner}', not '{energy}'")
+    options = {opt.key: opt.check(opt.default if given.get(name) is None else given[name])
+               for name, opt in info.options.items()}
+    # an option without a default is left out unless given
+    return {key: value for key, value in options.items() if value is not None}
+
+
+def _refuse_acceleration(info: MethodInfo, remedy: str = "") -> None:
+    if not info.accelerate:
+        raise InputError(f"accelerate: Anderson acceleration is for the local/global "
+                         f"descent methods; energy '{info.name}' is not one{remedy}")
+
+
+#: the classes ``Deformer(..., <name>=True)`` returns instead (``volumetric``), registered by
+#: their own modules (:mod:`arapkit.methods.volumetric` registers itself)
+_VARIANTS: dict[str, type] = {}
+
+
+def register_variant(flag: str, cls: type) -> type:
+    """Make ``Deformer(..., <flag>=True)`` return ``cls(mesh, handles, rings, **options)``.
+
+    ``cls`` takes the Deformer's keyword options, less the method's (``energy``,
+    ``sr_alpha``, ``sr_roi``, ``nodes``), which :class:`Deformer` checks first.
+
+    Examples
+    --------
+    >>> from arapkit.methods.volumetric import VolumetricDeformer
+    >>> register_variant("volumetric", VolumetricDeformer) is VolumetricDeformer
+    True
+    """
+    _VARIANTS[flag] = cls
+    return cls
+
+
+def _rows(ptr: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """CSR rows ``order`` of a structure with row pointer ``ptr``: (new ptr, entry ids)."""
+    lens = np.diff(ptr)[order]
+    new_ptr = np.zeros(len(order) + 1, dtype=np.int64)
+    np.cumsum(lens, out=new_ptr[1:])
+    idx = np.repeat(ptr[order] - new_ptr[:-1], lens) + np.arange(new_ptr[-1])
+    return new_ptr, idx
+
+
+def _check_outside_roi_is_held(mesh: Mesh, roi, handles) -> None:
+    """CGAL keeps the vertices outside its ROI where they are: here they must be handles."""
+    loose = np.ones(mesh.n_vertices, dtype=bool)
+    loose[np.asarray(roi)] = False
+    loose[np.asarray(handles, dtype=np.int64)] = False
+    if loose.any():
+        raise InputError(f"{mesh.name}: vertex {int(np.flatnonzero(loose)[0])} is outside "
+                         "sr_roi but not a handle (hold every vertex outside the ROI)")
+
+
+class Deformer:
+    """ARAP deformer: r-ring rigidity (default) or another method on the same handles.
+
+    Parameters
+    ----------
+    mesh : Mesh
+    handles : (h,) int
+        Vertices with positional constraints.
+    rings : int or (n,) int
+        Neighbourhood size r per vertex (1 = standard ARAP; larger = stiffer). Only for
+        ``energy="rring"``.
+    weights : {"cotan", "cotan-clamped", "cotan-clamped-each", "uniform"}
+        Edge weights (see :mod:`arapkit.mesh.weights`).
+    energy : {"rring", "spokes-and-rims", "sr-arap", "embedded"}
+        The method (see ``docs/methods.md``): r-ring ARAP (Chen et al. 2017),
+        spokes-and-rims ARAP (Chao et al. 2010), smooth-rotation ARAP (Levi & Gotsman
+        2014) or embedded deformation (Sumner et al. 2007, :mod:`arapkit.methods.embedded`).
+    sr_alpha : float, optional
+        SR-ARAP's rotation-smoothness weight (default 0.02, CGAL's), scaled by the surface
+        area as CGAL does.
+    sr_roi : (k,) int, optional
+        SR-ARAP only: pose CGAL's problem for a partial region of interest (its vertex ids,
+        handles included; a ``.sel`` file's statuses 1 and 2). Vertices outside it must be
+        handles (held at rest). Rotations are then coupled only within the ROI and its
+        one-ring, as in CGAL's ``Surface_mesh_deformation``; without it every vertex's
+        rotation is coupled to all its neighbours' (``docs/methods.md``).
+    nodes : int, optional
+        Embedded deformation's graph size (default 200, at most the vertex count).
+    tol : float
+        Stop when ``|E_{t-1} - E_t| / |E_{t-1}| < tol`` (the paper's test, gamma = 1e-3).
+    max_iter : int
+        Iteration cap.
+    init : {"identity", "laplacian"}
+        Start from identity rotations (the paper) or from Laplacian editing (the report).
+    free_components : {"follow", "fix", "error"}
+        What to do with connected components that hold no handle.
+    accelerate : bool
+        Anderson acceleration (Peng et al. 2018) of the local/global iteration with an
+        energy safeguard: an accelerated iterate is kept only when it lowers the energy,
+        otherwise the plain iterate is used, so the history stays monotone. Off by default
+        so that iterations (and the paper's stopping test) mean plain local/global steps;
+        see ``docs/benchmarks.md`` for when it pays. Not with ``energy="sr-arap"``.
+    history : int
+        Anderson history size m.
+    reorder : bool
+        Work internally in a bandwidth-reducing vertex order (results are returned in the
+        mesh's order and agree with ``reorder=False`` to round-off).
+    device : {"cpu", "auto", "cuda", "cuda:N", "torch-cpu"}
+        Where to solve: "cpu" runs the numba kernels; "cuda" (and "torch-cpu", the same
+        code on CPU tensors) the torch backend of :mod:`arapkit.arap.backends.torch_backend` (extra
+        ``arapkit[torch]``; see ``docs/torch.md``); "auto" is "cuda" when torch sees a
+        device, else "cpu".
+    volumetric : bool
+        Fill the closed surface with tetrahedra and solve r-ring ARAP on the volume's edge
+        graph (the course report's "inner edges"); the result is still the surface's. This
+        returns a :class:`arapkit.methods.volumetric.VolumetricDeformer` (same interface; needs
+        ``pip install 'arapkit[volume]'``). The surface ``weights`` do not apply.
+    density : float, optional
+        With ``volumetric=True``: spacing of the interior points in multiples of the
+        surface's mean edge length, or of 1/40 of the bounding-box diagonal where that is
+        larger (default :data:`arapkit.methods.volumetric.DEFAULT_DENSITY`).
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar, bar_bend
+    >>> mesh = bar()
+    >>> h, t = bar_bend(mesh, 90)
+    >>> res = Deformer(mesh, h, rings=2).solve(t)
+    >>> bool(res.converged), bool(res.energy >= 0)
+    (True, True)
+    >>> fast = Deformer(mesh, h, rings=2, accelerate=True).solve(t, tol=1e-6)
+    >>> bool(fast.energy <= res.energy)
+    True
+    """
+
+    def __new__(cls, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
+                volumetric: bool = False, density: float | None = None, **options):
+        if not volumetric:
+            if density is not None:
+                raise InputError("density is an option of volumetric=True")
+            return super().__new__(cls)
+        energy = options.pop("energy", "rring")
+        check_method(energy, options.pop("sr_alpha", None), options.pop("nodes", None),
+                     options.pop("sr_roi", None))
+        if not method(energy).volumetric:
+            raise InputError(f"volumetric=True runs r-ring ARAP; energy '{energy}' is for "
+                             "surfaces")
+        if density is not None:
+            options["density"] = density
+        return _VARIANTS["volumetric"](mesh, handles, rings, **options)
+
+    def __init__(
+        self,
+        mesh: Mesh,
+        handles,
+        rings=1,
+        weights: str = DEFAULT_WEIGHTS,
+        *,
+        volumetric: bool = False,
+        density: float | None = None,
+        energy: str = "rring",
+        sr_alpha: float | None = None,
+        sr_roi=None,
+        nodes: int | None = None,
+        tol: float = 1e-3,
+        max_iter: int = 1000,
+        init: str = "identity",
+        free_components: str = "follow",
+        accelerate: bool = False,
+        history: int = 5,
+        reorder: bool = True,
+        device: str = "cpu",
+    ) -> None:
+        self.device = check_device(device)
+        options = check_method(energy, sr_alpha, nodes, sr_roi)
+        info = method(energy)
+        self.mesh = mesh
+        self.energy = energy
+        self.weights_kind = weights
+        self.tol = tolerance(tol)
+        self.max_iter = iteration_cap(max_iter)
+        if init not in INITS:
+            raise InputError(f"unknown init '{init}' (use {' or '.join(INITS)})")
+        self.init = init
+        self.accelerate = bool(accelerate)
+        if self.accelerate:
+            _refuse_acceleration(info, " (use accelerate=False)")
+        self.history = integer(history, "history", lo=1, hi=1000)
+        self.factorisations = 0
+        self._laplacian_editor = None
+        self.embedded = None
+        if not info.local_global:
+            from .embedded import EmbeddedDeformation
+
+            if not np.all(np.asarray(rings) == 1):
+                raise InputError(f"energy '{energy}' has no rigidity map (rings must be 1)")
+            self.embedded = EmbeddedDeformation(mesh, handles, options["nodes"])
+            self.problem = None
+            self._rings = np.ones(mesh.n_vertices, dtype=np.int32)
+            self._weight_notes = []
+            return
+        self.problem = ARAPProblem.from_mesh(
+            mesh, handles, energy, weights, rings=rings, free_components=free_components,
+            reorder=reorder, **options)
+        self._rings = self.problem.energy.rings[self.problem.iperm]
+        if sr_roi is not None:
+            _check_outside_roi_is_held(mesh, sr_roi, handles)
+        self.backend = make_backend(self.problem, self.device)
+        self._weight_notes = self._check_rest_is_minimum()
+
+    # -- configuration (lazy refactorisation, as CGAL) -----------------------------
+    def set_handles(self, handles) -> None:
+        """Use a new handle set; the factorisation is redone at the next solve."""
+        self._laplacian_editor = None
+        if self.embedded is not None:
+            from .embedded import EmbeddedDeformation
+
+            self.embedded = EmbeddedDeformation(self.mesh, handles, len(self.embedded.nodes))
+            return
+        self.problem = self.problem.with_handles(handles)
+
+    def set_rings(self, rings) -> None:
+        """Use a new rigidity map (int or per-vertex); rebuilds neighbourhoods and the factor."""
+        p = self.problem
+        if not method(self.energy).rigidity_map:
+            if not np.all(np.asarray(rings) == 1):
+                raise InputError(f"energy '{self.energy}' has no rigidity map (rings must be 1)")
+            return
+        self.problem = p.with_rings(rings)
+        self.backend = make_backend(self.problem, self.device)
+        self._rings = self.problem.energy.rings[self.problem.iperm]
+        self._weight_notes = self._check_rest_is_minimum()
+
+    def _check_rest_is_minimum(self) -> list[str]:
+        """Say so when negative weights make the rest shape a non-minimum of eq. (1).
+
+        With all weights >= 0 every rest covariance is positive semi-definite, its best
+        rotation is the identity and the energy at rest is 0. Negative cotangent weights
+        (raw ``weights="cotan"`` on obtuse triangles) can make the best-fit energy at rest
+        negative: the shape then drifts even when every handle stays in place. Only then
+        is there something worth telling the user.
+        """
+        if self.energy_is_sum_of_squares:
+            return []
+        R = np.empty((self.mesh.n_vertices, 3, 3))
+        R_prev = np.tile(np.eye(3), (len(R), 1, 1))
+        E_rest = self.backend.local(self.problem.vertices.copy(), R, R_prev)
+        if E_rest >= -1e-9 * abs(self.backend.rest_term):
+            return []
+        bad = int(np.count_nonzero(np.abs(R - np.eye(3)).max(axis=(1, 2)) > 1e-6))
+        return [Advice(
+            f"{int((self.w < 0).sum())} edges have negative cotangent weights and the rest "
+            f"shape is not an energy minimum ({bad} neighbourhoods prefer a rotation at rest): "
+            "the shape drifts even where handles stay put and the energy can be negative; "
+            "use {weights} (positive weights)", weights=SOUND_WEIGHTS,
+        )]
+
+    @property
+    def energy_is_sum_of_squares(self) -> bool:
+        """Whether every weight is >= 0, so that the energy is a sum of squares (E >= 0).
+
+        False only for raw cotangent weights on meshes with obtuse triangles. Embedded
+        deformation has no edge weights: its energy is a sum of squared residuals by
+        construction.
+
+        Examples
+        --------
+        >>> from arapkit.mesh.shapes import bar
+        >>> Deformer(bar(), [0]).energy_is_sum_of_squares
+        True
+        """
+        if self.problem is None:
+            return True
+        return bool((self.w >= 0).all())
+
+    @property
+    def notes(self) -> list[str]:
+        """What the deformer did about the input: fixed components, problematic weights."""
+        if self.problem is None:
+            return []
+        return list(self.problem.notes) + self._weight_notes
+
+    @property
+    def handles(self) -> np.ndarray:
+        """Handle vertices."""
+        return self.embedded.handles if self.problem is None else self.problem.handles
+
+    def _local_global(self, what: str):
+        if self.problem is None:
+            raise InputError(f"{what}: energy '{self.energy}' is not a local/global method")
+        return self.problem
+
+    @property
+    def w(self) -> np.ndarray:
+        """Edge weights (by edge id of ``mesh.edges``)."""
+        return self._local_global("edge weights").w
+
+    @property
+    def rings(self) -> np.ndarray:
+        """r per vertex."""
+        return self._rings
+
+    @property
+    def timings(self) -> dict[str, float]:
+        """Precomputation times: neighbourhood_ms, factorisation_ms (once factorised)."""
+        return self.embedded.timings if self.problem is None else self.problem.timings
+
+    @property
+    def neighbourhoods(self) -> Neighbourhoods:
+        """The neighbourhoods in use, relabelled to the mesh's vertex numbering.
+
+        No search is repeated: the solver's structure is permuted.
+        """
+        p = self._local_global("neighbourhoods")
+        nbh = p.energy.nbh
+        eptr, eid = _rows(nbh.edge_ptr, p.iperm)
+        dptr, did = _rows(nbh.disk_ptr, p.iperm)
+        return Neighbourhoods(
+            nbh.rings[p.iperm], eptr, nbh.edge_idx[eid], nbh.edge_layer[eid], dptr,
+            p.perm[nbh.disk_idx[did]].astype(np.int32), nbh.disk_coef[did], nbh.edge_count,
+        )
+
+    def prepare(self) -> None:
+        """Factorise now (otherwise the first :meth:`solve` does it); reused for all targets."""
+        if self.problem is None:
+            return
+        if self.backend.problem is not self.problem or not self.problem.factorised:
+            if self.backend.problem.energy is not self.problem.energy:
+                self.backend = make_backend(self.problem, self.device)
+            was = self.problem.factorised
+            self.backend.bind(self.problem)
+            if not was and self.problem.elimination.factor is not None:
+                self.factorisations += 1
+
+    def vertex_energy(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Each neighbourhood's term of the energy for positions P and rotations R (mesh order).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from arapkit.mesh.shapes import bar
+        >>> m = bar()
+        >>> d = Deformer(m, [0])
+        >>> R = np.tile(np.eye(3), (m.n_vertices, 1, 1))
+        >>> float(d.vertex_energy(m.vertices, R).max())
+        0.0
+        """
+        p = self._local_global("vertex_energy")
+        Pi = np.ascontiguousarray(np.asarray(P, dtype=np.float64)[p.perm] / p.scale)
+        Ri = np.ascontiguousarray(np.asarray(R, dtype=np.float64)[p.perm])
+        return self.backend.vertex_energy(Pi, Ri)[p.iperm] * (p.scale * p.scale)
+
+    def _initial_positions(self, targets: np.ndarray, init) -> np.ndarray | None:
+        if init is not None and not isinstance(init, str):
+            P = np.array(real_array(init, "init"), dtype=np.float64)
+            if P.shape != self.mesh.vertices.shape or not np.isfinite(P).all():
+                raise InputError(
+                    f"init: expected finite positions of shape {self.mesh.vertices.shape}"
+                )
+            return P
+        mode = self.init if init is None else init
+        if mode not in INITS:
+            raise InputError(f"unknown init '{mode}' (use {' or '.join(INITS)})")
+        if mode == "identity":
+            return None
+        # embedded deformation has no problem: its constrained vertices are the handles
+        p = self.problem
+        if self._laplacian_editor is None:
+            from .laplacian import LaplacianEditor
+
+            self._laplacian_editor = LaplacianEditor(
+                self.mesh, self.handles if p is None else p.constrained, "uniform")
+        return self._laplacian_editor.solve(targets if p is None else
+                                            p.constrained_targets(targets))
+
+    # -- the solve ----------------------------------------------------------------
+    def solve(
+        self,
+        targets,
+        init=None,
+        tol: float | None = None,
+        max_iter: int | None = None,
+        callback: Callable[[int, float, np.ndarray], bool | None] | None = None,
+        accelerate: bool | None = None,
+    ) -> Result:
+        """Deform so that the handles reach ``targets``.
+
+        Parameters
+        ----------
+        targets : (h, 3)
+            Positions of the handles, in the order of ``handles``.
+        init : None, "identity", "laplacian" or (n, 3) array
+            Starting point; an array is a warm start (e.g. the previous result).
+        tol, max_iter : optional overrides of the constructor's values.
+        callback : callable(iteration, energy, vertices) -> bool, optional
+            Called after every iteration; returning True stops the loop.
+        accelerate : optional override of the constructor's ``accelerate``.
+
+        Returns
+        -------
+        Result
+        """
+        T = check_targets(self.handles, targets)
+        tol = self.tol if tol is None else tolerance(tol)
+        max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
+        accelerate = self.accelerate if accelerate is None else bool(accelerate)
+        if accelerate:
+            _refuse_acceleration(method(self.energy))
+        if self.embedded is not None:
+            # a start shape becomes node maps fitted to it (EmbeddedDeformation.fit_node_maps)
+            return self.embedded.solve(T, init=self._initial_positions(T, init), tol=tol,
+                                       max_iter=max_iter, callback=callback)
+        self.prepare()
+        start = self._initial_positions(T, init)
+        return local_global(self.problem, self.backend, T, start, tol=tol, max_iter=max_iter,
+                            callback=callback, accelerate=accelerate, history=self.history)
