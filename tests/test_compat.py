@@ -8,6 +8,7 @@ arapkit 0.1).
 from __future__ import annotations
 
 import importlib
+import subprocess
 import sys
 import warnings
 
@@ -83,6 +84,13 @@ def _fresh_import(name: str):
         warnings.simplefilter("always")
         module = importlib.import_module(name)
     return module, [w for w in caught if issubclass(w.category, DeprecationWarning)]
+
+
+def test_old_path_warning_names_the_importing_file():
+    """The warning points at the line that imports the old path, so a script sees it."""
+    out = subprocess.run([sys.executable, "-c", "import arapkit.solver"], capture_output=True,
+                         text=True, check=True)
+    assert "<string>:1: DeprecationWarning: arapkit.solver moved to" in out.stderr
 
 
 def test_every_old_module_is_listed():

@@ -102,7 +102,7 @@ class _AliasLoader(importlib.abc.Loader):
     def create_module(self, spec: importlib.machinery.ModuleSpec) -> types.ModuleType:
         new = MOVED[spec.name]
         warnings.warn(f"{spec.name} moved to {new}; the old path goes in the next release",
-                      DeprecationWarning, stacklevel=3)
+                      DeprecationWarning, stacklevel=2)  # warnings skips importlib's frames
         return _Alias(spec.name, importlib.import_module(new))
 
     def exec_module(self, module: types.ModuleType) -> None:
