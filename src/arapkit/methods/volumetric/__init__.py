@@ -34,7 +34,10 @@ Modules: :mod:`~arapkit.methods.volumetric.mesher` (the mesher's driver and the 
 """
 
 from ...mesh.quality import enclosed_volume as mesh_volume  # the name this package has always used
-from .deformer import VolumetricDeformer  # registers Deformer(volumetric=True)
+from .deformer import (  # registers Deformer(volumetric=True)
+    VOLUME_SOLVE_DEFAULTS,
+    VolumetricDeformer,
+)
 from .graph import (
     CLAMP_FRACTION,
     DEFAULT_VOLUME_WEIGHTS,
@@ -43,6 +46,7 @@ from .graph import (
     tet_cotangent_weights,
     tet_volume_weights,
     volume_graph,
+    volume_rings,
 )
 from .mesher import (
     LATTICE_CLEARANCE,
@@ -82,6 +86,7 @@ __all__ = [
     "TetMesh",
     "VOLUME_FORMATS",
     "VOLUME_WEIGHTS",
+    "VOLUME_SOLVE_DEFAULTS",
     "VolumetricDeformer",
     "check_closed",
     "extend_rings",
@@ -97,4 +102,5 @@ __all__ = [
     "tet_volume_weights",
     "tetrahedralise",
     "volume_graph",
+    "volume_rings",
 ]
