@@ -21,8 +21,10 @@ Construction (see ``docs/volumetric.md``)
    on the edge, a stiffness per unit volume; ``uniform`` and clamped tetrahedral cotangent
    weights are the alternatives. All are positive, so the rest shape is an exact minimum and
    the system is positive definite.
-4. Per-vertex rigidity r given on the surface extends inwards: each interior vertex takes the
-   r of its nearest surface vertex (rest positions).
+4. Per-vertex rigidity r is given on the surface (:func:`volume_rings`): each surface vertex's
+   ring on the volume is the largest one that reaches only skin of its surface r-ring (r hops
+   through the inside would span whole cross-sections); interior vertices take the r of their
+   nearest surface vertex (rest positions).
 
 The result is the input surface: the same vertices (deformed, first ``n`` rows of the volume
 solve), the same faces.
