@@ -21,8 +21,10 @@ Construction (see ``docs/volumetric.md``)
    on the edge, a stiffness per unit volume; ``uniform`` and clamped tetrahedral cotangent
    weights are the alternatives. All are positive, so the rest shape is an exact minimum and
    the system is positive definite.
-4. Per-vertex rigidity r given on the surface extends inwards: each interior vertex takes the
-   r of its nearest surface vertex (rest positions).
+4. Per-vertex rigidity r is given on the surface (:func:`volume_rings`): each surface vertex's
+   ring on the volume is the largest one that reaches only skin of its surface r-ring (r hops
+   through the inside would span whole cross-sections); interior vertices take the r of their
+   nearest surface vertex (rest positions).
 
 The result is the input surface: the same vertices (deformed, first ``n`` rows of the volume
 solve), the same faces.
@@ -34,7 +36,10 @@ Modules: :mod:`~arapkit.methods.volumetric.mesher` (the mesher's driver and the 
 """
 
 from ...mesh.quality import enclosed_volume as mesh_volume  # the name this package has always used
-from .deformer import VolumetricDeformer  # registers Deformer(volumetric=True)
+from .deformer import (  # registers Deformer(volumetric=True)
+    VOLUME_SOLVE_DEFAULTS,
+    VolumetricDeformer,
+)
 from .graph import (
     CLAMP_FRACTION,
     DEFAULT_VOLUME_WEIGHTS,
@@ -43,6 +48,7 @@ from .graph import (
     tet_cotangent_weights,
     tet_volume_weights,
     volume_graph,
+    volume_rings,
 )
 from .mesher import (
     LATTICE_CLEARANCE,
@@ -82,6 +88,7 @@ __all__ = [
     "TetMesh",
     "VOLUME_FORMATS",
     "VOLUME_WEIGHTS",
+    "VOLUME_SOLVE_DEFAULTS",
     "VolumetricDeformer",
     "check_closed",
     "extend_rings",
@@ -97,4 +104,5 @@ __all__ = [
     "tet_volume_weights",
     "tetrahedralise",
     "volume_graph",
+    "volume_rings",
 ]

@@ -11,13 +11,20 @@ import time
 import numpy as np
 
 from ...arap.constraints import check_handles
+from ...arap.rings import check_rings
 from ...errors import InputError
 from ...mesh.model import Mesh
 from ..deformer import Deformer, Result, register_variant
-from .graph import DEFAULT_VOLUME_WEIGHTS, extend_rings, volume_graph
+from .graph import DEFAULT_VOLUME_WEIGHTS, volume_graph, volume_rings
 from .tets import DEFAULT_DENSITY, TetMesh, check_closed, save_volume, tetrahedralise
 
-__all__ = ["VolumetricDeformer"]
+__all__ = ["VOLUME_SOLVE_DEFAULTS", "VolumetricDeformer"]
+
+#: solver options a volumetric solve takes unless told otherwise: converged answers. At the
+#: surface solver's tol 1e-3 slow volumes stop while still moving (docs/volumetric.md,
+#: "Defaults": the elephant shows 0 self-intersecting faces at 1e-3, about 50 converged);
+#: acceleration makes 1e-5 affordable (the cactus twist: 851 -> 72 iterations)
+VOLUME_SOLVE_DEFAULTS = {"tol": 1e-5, "accelerate": True}
 
 
 class VolumetricDeformer:
@@ -35,14 +42,16 @@ class VolumetricDeformer:
     handles : (h,) int
         Surface vertices with positional constraints.
     rings : int or (n,) int
-        r per surface vertex; interior vertices take their nearest surface vertex's.
+        r per surface vertex, as for surface ARAP: on the volume it becomes the ring that
+        reaches the same skin (:func:`~arapkit.methods.volumetric.graph.volume_rings`).
     density : float
         Interior lattice spacing (see :func:`tetrahedralise`).
     tet : TetMesh, optional
         A tetrahedralisation of ``mesh`` to reuse (from :func:`tetrahedralise`).
     **options
         ``tol``, ``max_iter``, ``init``, ``free_components``, ``accelerate``, ``history``,
-        ``reorder``, ``device``: as for :class:`arapkit.Deformer`.
+        ``reorder``, ``device``: as for :class:`arapkit.Deformer`, except that ``tol`` and
+        ``accelerate`` default to :data:`VOLUME_SOLVE_DEFAULTS` (1e-5, accelerated).
 
     Examples
     --------
@@ -70,7 +79,9 @@ class VolumetricDeformer:
         self.tet = tet
         t0 = time.perf_counter()
         self.graph, self.w = volume_graph(mesh, tet, weights)
-        self._inner = Deformer(self.graph, handles, extend_rings(rings, tet),
+        self._rings = check_rings(rings, mesh.n_vertices)
+        options = {**VOLUME_SOLVE_DEFAULTS, **options}
+        self._inner = Deformer(self.graph, handles, volume_rings(rings, mesh, self.graph, tet),
                                weights=self.w, **options)
         self._graph_ms = 1e3 * (time.perf_counter() - t0)
         self.handles = handles
@@ -82,8 +93,8 @@ class VolumetricDeformer:
 
     @property
     def rings(self) -> np.ndarray:
-        """r per surface vertex."""
-        return self._inner.rings[: self.n]
+        """r per surface vertex, as given (the volume's rings are derived from it)."""
+        return self._rings
 
     @property
     def energy_is_sum_of_squares(self) -> bool:
@@ -106,7 +117,8 @@ class VolumetricDeformer:
 
     def set_rings(self, rings) -> None:
         """Use a new rigidity map on the surface (extended inwards)."""
-        self._inner.set_rings(extend_rings(rings, self.tet))
+        self._inner.set_rings(volume_rings(rings, self.mesh, self.graph, self.tet))
+        self._rings = check_rings(rings, self.n)
 
     def prepare(self) -> None:
         """Factorise now."""

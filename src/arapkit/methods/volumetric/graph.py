@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...arap.rings import check_rings
+from ...arap.rings import check_rings, neighbourhoods_from_arrays
 from ...errors import InputError
 from ...mesh.model import Mesh
 from .tets import TetMesh
 
 __all__ = ["CLAMP_FRACTION", "DEFAULT_VOLUME_WEIGHTS", "VOLUME_WEIGHTS", "extend_rings",
-           "tet_cotangent_weights", "tet_volume_weights", "volume_graph"]
+           "tet_cotangent_weights", "tet_volume_weights", "volume_graph", "volume_rings"]
 
 #: weights below this fraction of the mean absolute weight are raised to it
 CLAMP_FRACTION = 1e-3
@@ -146,3 +146,63 @@ def extend_rings(rings, tm: TetMesh) -> np.ndarray:
         return r
     _, near = cKDTree(tm.vertices[:n]).query(tm.vertices[n:])
     return np.concatenate([r, r[near]])
+
+
+def volume_rings(rings, surface: Mesh, graph: Mesh, tm: TetMesh) -> np.ndarray:
+    """Per-vertex r on the volume's edge graph that couples the skin the surface's r-ring does.
+
+    The paper's ``N(k, r)`` on the surface fits one rotation to the skin within r edges of
+    k. On the volume's graph, r edges from k through the interior reach skin much farther
+    along the surface (across a limb, whose far side is half a perimeter away on the
+    surface and a few tet edges away through it), so the same r is a far stiffer
+    neighbourhood: one rotation over a whole cross-section, which a twist or a bend can only
+    satisfy by thinning the limb. Here a surface vertex k gets the largest ``r' <= r_k``
+    whose volume ring reaches only surface vertices of its surface ring ``N(k, r_k)``
+    (at least 1: the tet spokes); interior vertices take their nearest surface vertex's.
+
+    Parameters
+    ----------
+    rings : int or (n,) int
+        r per surface vertex.
+    surface : Mesh
+        The closed surface (its vertices are the first ``n`` of ``graph``).
+    graph : Mesh
+        The volume's edge graph (:func:`volume_graph`).
+    tm : TetMesh
+        The tetrahedralisation ``graph`` was made from.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1.0], [0.2, 0.2, 0.2]])
+    >>> F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    >>> T = np.array([[0, 1, 2, 4], [0, 1, 3, 4], [0, 2, 3, 4], [1, 2, 3, 4]])
+    >>> s, tm = Mesh(V[:4], F), TetMesh(V, T, 4)
+    >>> volume_rings(2, s, volume_graph(s, tm)[0], tm).tolist()
+    [2, 2, 2, 2, 2]
+    """
+    n = tm.n_surface
+    r = check_rings(rings, n)
+    out = np.ones(n, dtype=np.int32)
+    if r.max() > 1:
+        N = graph.n_vertices
+        k, v = _disks(surface, r)
+        allowed = np.unique(k * N + v)
+        for j in range(2, int(r.max()) + 1):  # the volume ring of k grows with j
+            rj = np.ones(N, dtype=np.int32)
+            rj[:n][r >= j] = j
+            k, v = _disks(graph, rj)
+            skin = (k < n) & (v < n)
+            beyond = np.unique(k[skin][~np.isin(k[skin] * N + v[skin], allowed)])
+            ok = r >= j
+            ok[beyond] = False
+            out[ok] = j
+    return extend_rings(out, tm)
+
+
+def _disks(mesh: Mesh, rings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(owner k, vertex v) pairs: v is within ``rings[k]`` edges of k."""
+    E = mesh.edges
+    nbh = neighbourhoods_from_arrays(mesh.n_vertices, E, mesh.vertices, np.ones(len(E)), rings)
+    owner = np.repeat(np.arange(mesh.n_vertices, dtype=np.int64), np.diff(nbh.disk_ptr))
+    return owner, nbh.disk_idx.astype(np.int64)
