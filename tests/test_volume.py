@@ -557,3 +557,22 @@ def test_volumetric_solves_converge_by_default(thick):
     assert res.converged
     conv = VolumetricDeformer(m, h, tet=tm, accelerate=True).solve(t, tol=1e-5)
     assert np.abs(res.vertices - conv.vertices).max() <= 1e-9 * m.bounding_box_diagonal
+
+
+@needs_mesher
+def test_cli_volumetric_defaults_are_the_converged_ones(tmp_path):
+    """`deform --volumetric` with default options solves at volumetric ARAP's own tol and
+    with acceleration; given options still win, and surface runs keep the Deformer's."""
+    from arapkit.cli import main
+
+    def params(*extra):
+        report = tmp_path / "r.json"
+        assert main(["deform", str(ROOT / "examples" / "cactus.off"), "--handles",
+                     str(ROOT / "examples" / "cactus-twist.json"), "-o", str(tmp_path / "o.ply"),
+                     "--report", str(report), "--quiet", *extra]) == 0
+        p = json.loads(report.read_text())["parameters"]
+        return p["tol"], p["accelerate"]
+
+    assert params("--volumetric") == (VOLUME_SOLVE_DEFAULTS["tol"], True)
+    assert params("--volumetric", "--tol", "1e-3", "--no-accelerate") == (1e-3, False)
+    assert params() == (1e-3, False)

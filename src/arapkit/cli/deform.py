@@ -113,8 +113,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     p.add_argument(
         "--tol",
         type=tolerance,
-        default=1e-3,
-        help="stop when the relative energy decrease is below this (default 1e-3)",
+        default=None,
+        help="stop when the relative energy decrease is below this (default 1e-3; 1e-5 with "
+        "--volumetric)",
     )
     p.add_argument(
         "--max-iter",
@@ -131,9 +132,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     )
     p.add_argument(
         "--accelerate",
-        action="store_true",
+        action=argparse.BooleanOptionalAction,
+        default=None,
         help="Anderson acceleration with an energy safeguard: fewer, costlier iterations "
-        "(pays on large meshes; see docs/benchmarks.md)",
+        "(pays on large meshes; see docs/benchmarks.md; default off, on with --volumetric)",
     )
     p.add_argument(
         "-o",
@@ -267,10 +269,9 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
         rings=args.rings,
         rings_file=args.rings_file,
         weights=args.weights,
-        tol=args.tol,
+        **_solve_defaults(args),
         max_iter=args.max_iter,
         init=args.init,
-        accelerate=args.accelerate,
         weld=getattr(args, "weld", None),
         volumetric=args.volumetric,
         interior_density=args.interior_density,
@@ -303,7 +304,7 @@ def run(args: argparse.Namespace) -> int:
     if not res.converged:
         note(
             f"{args.mesh}: stopped after {res.iterations} iterations without converging "
-            f"(relative decrease still >= {args.tol:g}; raise --max-iter)",
+            f"(relative decrease still >= {job.tol:g}; raise --max-iter)",
             args.quiet,
         )
     if args.volumetric and args.save_volume:
@@ -358,6 +359,19 @@ def _method_options(args: argparse.Namespace) -> dict[str, Any]:
     """The method's options as used (defaults filled in), named as in the CLI."""
     opts = getattr(args, "_method_options", {})
     return {("sr_alpha" if k == "alpha" else k): v for k, v in opts.items()}
+
+
+def _solve_defaults(args: argparse.Namespace) -> dict[str, Any]:
+    """``tol`` and ``accelerate`` as given, else the method's defaults: volumetric ARAP's
+    converged ones (:data:`~arapkit.methods.volumetric.VOLUME_SOLVE_DEFAULTS`) or the
+    Deformer's."""
+    from arapkit.methods.volumetric import VOLUME_SOLVE_DEFAULTS
+    from arapkit.workflows.jobs import DeformJob
+
+    own = VOLUME_SOLVE_DEFAULTS if args.volumetric else {
+        "tol": DeformJob.tol, "accelerate": DeformJob.accelerate}
+    given = {"tol": args.tol, "accelerate": args.accelerate}
+    return {k: own[k] if v is None else v for k, v in given.items()}
 
 
 def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:

@@ -78,8 +78,12 @@ def method_list(rings: int = 3, rings_map: np.ndarray | None = None,
     if rings_map is not None:
         methods.append(("r-ring mixed r", {"energy": "rring", "rings": rings_map}))
     if volumetric:
+        from ..methods.volumetric import VOLUME_SOLVE_DEFAULTS
+
+        # volumetric ARAP at its own (converged) tolerance, with acceleration
         methods.append(("volumetric ARAP", {"energy": "rring", "volumetric": True,
-                                            "rings": 1 if rings_map is None else rings_map}))
+                                            "rings": 1 if rings_map is None else rings_map,
+                                            **VOLUME_SOLVE_DEFAULTS}))
     return methods
 
 
