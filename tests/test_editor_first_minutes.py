@@ -226,3 +226,23 @@ def test_browser_energy_legend_reads_zero_at_rest(tmp_path):
             assert len(app.mesh_nodes()) == 2 and not app.mesh_node.visible
     finally:
         app.stop()
+
+
+def test_r_sliders_follow_the_library_and_gizmos_fit_their_handle(tmp_path):
+    from arapkit.validate import MAX_RINGS
+
+    app = example_app("cactus.off", tmp_path)
+    st = app.state
+    try:
+        assert app.sl_global.max == app.sl_paint.max == MAX_RINGS
+        pot, top = _pot_and_top(app)
+        small = st.add_handle(top[:4])
+        big = st.add_handle(pot)
+        for h in (small, big):
+            radius = np.linalg.norm(h.anchor - h.pivot, axis=1).max()
+            scale = app.gizmo_scale(h)
+            assert 0.05 * app.diag <= scale <= 0.3 * app.diag
+            assert scale >= min(4 * radius, 0.3 * app.diag)  # reaches past its handle
+        assert app.gizmo_scale(small) < app.gizmo_scale(big)
+    finally:
+        app.stop()
