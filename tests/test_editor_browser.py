@@ -192,7 +192,8 @@ def test_browser_drag_deforms_mesh(tmp_path):
             cam = client.camera
             view = CameraView(np.asarray(cam.position), np.asarray(cam.wxyz),
                               float(cam.fov), float(cam.aspect))
-            arrow = g + 0.5 * 0.12 * app.diag * np.array([0.0, 0.0, 1.0])
+            # beyond the rotation rings, which cross the axes at about 0.65 of the arrow
+            arrow = g + 0.85 * app.gizmo_scale(tip) * np.array([0.0, 0.0, 1.0])
             uv, _ = view.project(arrow[None])
             x = box["x"] + uv[0, 0] * box["width"]
             y = box["y"] + uv[0, 1] * box["height"]

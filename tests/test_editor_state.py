@@ -360,3 +360,43 @@ def test_worker_newer_request_supersedes_older(mesh):
     assert np.isfinite(last.energy) and last.energy > 0
     moved = last.vertices[tip.vertices] - mesh.vertices[tip.vertices]
     assert np.allclose(moved, [0.0, 0.0, 0.8], atol=1e-9)
+
+
+# ------------------------------------------------------------------ first minutes
+
+
+def test_tool_help_promises_only_what_the_tool_does():
+    from arapkit.editor.tools import TOOLS, find_tool
+
+    for t in TOOLS:
+        assert ("Shift+drag" in t.help) == (t.rectangle or t.brush), t.label
+        assert ("rectangle" in t.help) == t.rectangle and ("Paint r" in t.help) == t.paints
+    # the page starts with the selection tool, which draws the rectangle the CLI promises
+    assert find_tool("Select").rectangle and find_tool("Select: click") is find_tool("select")
+
+
+def test_next_step_follows_the_handles(st):
+    from arapkit.editor.panels import handle_controls, next_step
+
+    assert "select a region" in next_step(st)
+    h = st.add_handle(np.arange(CAP))
+    assert "Make fixed handle" in next_step(st)
+    st.set_frozen(h.name, True)
+    assert "Make handle" in next_step(st) and "Make fixed" not in next_step(st)
+    st.add_handle(np.arange(st.n - CAP, st.n))
+    assert next_step(st).startswith("**Next:** drag a gizmo")
+    labels = handle_controls(h.name)
+    assert h.name in labels["heading"] and labels["remove"] == f"Remove {h.name}"
+    assert handle_controls("x" * 80)["remove"].endswith("…")
+
+
+def test_energy_scale_has_a_floor_relative_to_the_mesh():
+    from arapkit.editor.views import energy_floor, energy_legend_html, energy_scale
+
+    unit = 0.3  # rest term per vertex
+    noise = np.full(100, 4e-10)  # round-off of a shape at rest
+    vmax = energy_scale(noise, energy_floor(unit))
+    assert vmax == pytest.approx(1e-6 * unit)
+    assert "0 everywhere" in energy_legend_html(vmax, floor=energy_floor(unit), top=4e-10)
+    bent = np.linspace(0, 1e-2 * unit, 100)  # a real deformation keeps its own scale
+    assert energy_scale(bent, energy_floor(unit)) == pytest.approx(np.percentile(bent, 99))

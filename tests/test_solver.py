@@ -142,6 +142,43 @@ def test_rigid_motion_of_handles(r):
     assert res.converged
 
 
+@pytest.mark.parametrize("r", [1, 3])
+def test_rigid_motion_converges_at_once_from_any_warm_start(r):
+    """A rigid motion of every handle has energy 0: reached in a step, called converged."""
+    from pathlib import Path
+
+    from scipy.spatial.transform import Rotation
+
+    m = load_mesh(Path(__file__).resolve().parents[1] / "examples" / "cactus.off")
+    V, y = m.vertices, m.vertices[:, 1]
+    h = np.flatnonzero((y < np.quantile(y, 0.05)) | (y > np.quantile(y, 0.95)))
+    d = Deformer(m, h, rings=r)
+    bent_t = V[h] + np.where(y[h, None] > 5, [1.5, 0.0, 0.0], 0.0)
+    bent = d.solve(bent_t, max_iter=30).vertices
+    Q1 = Rotation.from_rotvec([0.3, -0.2, 0.5]).as_matrix()
+    Q2 = Rotation.from_rotvec([-0.1, 0.4, 0.2]).as_matrix()
+    moved = V @ Q1.T + [1.5, -2.0, 0.7]
+    for init in (None, V, bent, moved):
+        for Q, shift in ((Q1, [1.5, -2.0, 0.7]), (Q1, [1.6, -2.0, 0.7]), (Q2, [-1, 3, 0.2])):
+            res = d.solve(V[h] @ Q.T + shift, init=init)
+            assert res.converged and res.iterations <= 3, (res.iterations, res.history[-3:])
+            assert np.abs(res.vertices - (V @ Q.T + shift)).max() < 1e-9 * m.bounding_box_diagonal
+
+
+def test_energy_at_round_off_is_converged():
+    """A translation of two handles (no rigid start: collinear) is exact after one step.
+
+    Its energy is then round-off of either sign, which the relative decrease cannot judge.
+    """
+    m = load_mesh(data_path("meshes", "bunny00.off"))
+    V = m.vertices
+    d = Deformer(m, [0, len(V) // 2])
+    rng = np.random.default_rng(0)
+    its = [d.solve(V[d.handles] + rng.normal(size=3) * m.bounding_box_diagonal).iterations
+           for _ in range(8)]
+    assert its == [1] * 8
+
+
 def test_iterations_fall_as_r_grows():
     """Paper, Table 1 and Fig. 5: the bar bent 180 degrees converges faster for larger r."""
     m = bar()

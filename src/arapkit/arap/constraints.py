@@ -43,6 +43,7 @@ __all__ = [
     "check_handles",
     "check_targets",
     "quiet_c_output",
+    "rigid_motion",
 ]
 
 
@@ -162,14 +163,30 @@ def follow_rigidly(mesh: Mesh | EdgeGraph, free: np.ndarray, deformed: np.ndarra
         near = tree.query(V[members], k=1)[1]
         centre = tree.query(V[members].mean(axis=0), k=min(k, len(anchored)))[1]
         a = anchored[np.unique(np.concatenate([np.ravel(near), np.ravel(centre)]))]
-        src, dst = V[a], deformed[a]
-        ms, md = src.mean(axis=0), dst.mean(axis=0)
-        U, _, Vt = np.linalg.svd((src - ms).T @ (dst - md))
-        D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-        R = Vt.T @ D @ U.T
-        deformed[members] = (V[members] - ms) @ R.T + md
+        R, t = rigid_motion(V[a], deformed[a])
+        deformed[members] = V[members] @ R.T + t
         if rotations is not None:
             rotations[members] = R
+
+
+def rigid_motion(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The rigid motion that best maps points ``src`` onto ``dst`` (Kabsch).
+
+    Returns ``(R, t)`` with ``det R = +1`` minimising ``sum |src @ R.T + t - dst|^2``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> src = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    >>> R, t = rigid_motion(src, src[:, [1, 0, 2]] * [-1, 1, 1] + 2.0)  # a quarter turn
+    >>> (np.round(R, 12) + 0.0).tolist(), t.tolist()
+    ([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], [2.0, 2.0, 2.0])
+    """
+    ms, md = src.mean(axis=0), dst.mean(axis=0)
+    U, _, Vt = np.linalg.svd((src - ms).T @ (dst - md))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
+    R = Vt.T @ D @ U.T
+    return R, md - ms @ R.T
 
 
 def _flush_c_stdio() -> None:

@@ -35,7 +35,7 @@ import viser
 
 from arapkit import validate
 from arapkit.editor.files import MESH_SUFFIXES, FileActions, safe_stem
-from arapkit.editor.geometry import UP_AXES
+from arapkit.editor.geometry import UP_AXES, framing_distance
 from arapkit.editor.panels import MAX_R, VIEWS, Panels
 from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, PointerTools
@@ -43,6 +43,7 @@ from arapkit.editor.views import (
     RING_COLORS,
     SHADED_COLOR,
     energy_colors,
+    energy_floor,
     energy_labels,
     energy_legend_html,
     energy_scale,
@@ -57,6 +58,10 @@ from arapkit.errors import InputError
 # UP_AXES: geometry; MAX_R, VIEWS: panels; TOOLS: tools)
 __all__ = ["MAX_R", "MESH_SUFFIXES", "TOOLS", "UP_AXES", "VIEWS", "EditorApp", "safe_stem"]
 
+#: how much of the view the model fills when a mesh is opened
+FRAME_FILL = 0.7
+#: a gizmo's size in radii of its handle (see EditorApp.gizmo_scale)
+GIZMO_PER_RADIUS = 6.0
 HANDLE_RGB, FROZEN_RGB, ACTIVE_RGB, SELECT_RGB = (255, 140, 0), (110, 110, 135), (255, 235, 0), (
     230, 30, 200)
 
@@ -217,10 +222,15 @@ class EditorApp(Panels, PointerTools, FileActions):
         front = front - (front @ up) * up
         front /= np.linalg.norm(front)
         centre = self._centre
-        eye = centre + self.diag * (0.9 * front + 0.55 * up + 0.15 * np.cross(up, front))
+        toward_eye = 0.9 * front + 0.55 * up + 0.15 * np.cross(up, front)
+        toward_eye /= np.linalg.norm(toward_eye)
+        # the scene left of the GUI panel is about 840 x 800 pixels in a 1200 x 800 window
+        dist = framing_distance(self.state.vertices, centre, toward_eye, up,
+                                self.server.initial_camera.fov, 1.05, FRAME_FILL)
+        eye = centre + dist * toward_eye
         # Aim a little right of the centre so the GUI panel (right side) hides less.
         right = np.cross(centre - eye, up)
-        shift = 0.12 * self.diag * right / np.linalg.norm(right)
+        shift = 0.05 * dist * right / np.linalg.norm(right)
         centre, eye = centre + shift, eye + shift
         self.server.scene.set_up_direction(up_name)
         self.server.initial_camera.position = tuple(eye)
@@ -263,10 +273,13 @@ class EditorApp(Panels, PointerTools, FileActions):
                 legend = "<i>energy appears after an r-ring ARAP solve</i>"
             else:
                 # Round-off energies (an undeformed mesh) all get the lowest colour.
-                vmax = max(energy_scale(self.vertex_energy), 1e-12 * self.diag**2)
+                unit = self.last_update.energy_unit if self.last_update else float("nan")
+                floor = energy_floor(unit)
+                vmax = energy_scale(self.vertex_energy, floor)
                 colors = tuple(energy_colors())
                 labels = energy_labels(self.vertex_energy, vmax, len(colors))
-                legend = energy_legend_html(vmax)
+                legend = energy_legend_html(vmax, len(colors), floor,
+                                            float(np.nanmax(self.vertex_energy, initial=0.0)))
         if labels is None:
             self.mesh_node.vertices = V32
             self.mesh_node.visible = True
@@ -296,7 +309,8 @@ class EditorApp(Panels, PointerTools, FileActions):
 
     def mesh_nodes(self) -> list[Any]:
         """The scene nodes that show the mesh (shaded, and one per colour of a view)."""
-        return [self.mesh_node] + [n for _, n in self._groups]
+        shown = [self.mesh_node] if self.mesh_node is not None else []  # none before start-up
+        return shown + [n for _, n in self._groups]
 
     def show_points(self, key: str, idx: np.ndarray, colors: Any, size: float) -> None:
         """Show the vertices ``idx`` as round dots, as the marker layer ``key``."""
@@ -331,14 +345,27 @@ class EditorApp(Panels, PointerTools, FileActions):
         self._gizmos = []
         for h in self.state.handles:
             if not h.frozen:
-                self._gizmos.append(self._make_gizmo(h.name, h.wxyz, h.position))
+                self._gizmos.append(self._make_gizmo(h.name, h.wxyz, h.position,
+                                                     self.gizmo_scale(h)))
 
-    def _make_gizmo(self, name: str, wxyz: np.ndarray, position: np.ndarray) -> Any:
+    def gizmo_scale(self, handle: Any) -> float:
+        """Size of a handle's gizmo: a few times the handle's radius, within mesh bounds.
+
+        The gizmo is drawn over the mesh: its rings then circle a small handle's dots
+        instead of hiding them, and a large handle gets a gizmo that reaches past it.
+        """
+        radius = float(np.linalg.norm(handle.anchor - handle.pivot, axis=1).max())
+        return float(np.clip(GIZMO_PER_RADIUS * radius, 0.08 * self.diag, 0.3 * self.diag))
+
+    def _make_gizmo(self, name: str, wxyz: np.ndarray, position: np.ndarray,
+                    scale: float) -> Any:
         # Fresh node names: a late message for a removed gizmo can never hit a new one.
         self._gizmo_serial += 1
         tc = self.server.scene.add_transform_controls(
-            f"/gizmos/g{self._gizmo_serial}", scale=0.12 * self.diag, line_width=3.0,
+            f"/gizmos/g{self._gizmo_serial}", scale=scale, line_width=3.0,
             depth_test=False, wxyz=tuple(wxyz), position=tuple(position),
+            # no plane squares: drawn over everything at the centre, they hid the handle
+            disable_sliders=True,
         )
 
         # async: viser then runs start/update/end in order on its event loop.
@@ -355,8 +382,7 @@ class EditorApp(Panels, PointerTools, FileActions):
             st = self.state
             idx, tgt = st.constraints()
             if len(idx) == 0:
-                self.status("No handles yet: select vertices (click or Shift+drag a "
-                             "rectangle) and press **Make handle from selection**.")
+                self.status("No handles yet: see **Next** below.")
                 return None
             req = SolveRequest(st.mesh, idx, tgt, st.rings, dataclasses.replace(st.settings))
             return self.worker.submit(req)
@@ -425,6 +451,7 @@ class EditorApp(Panels, PointerTools, FileActions):
         )
 
     def status(self, text: str) -> None:
-        """Set the status line at the top of the panel."""
+        """Set the status line at the top of the panel (what an error line gives way to)."""
+        self._status_ok = text
         self.md_status.content = text
 

@@ -18,8 +18,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
-__all__ = ["UP_AXES", "CameraView", "in_screen_rect", "nearest_corner", "nearest_vertex",
-           "quat_to_matrix", "raycast", "vertex_normals", "vertices_within"]
+__all__ = ["UP_AXES", "CameraView", "framing_distance", "in_screen_rect", "nearest_corner",
+           "nearest_vertex", "quat_to_matrix", "raycast", "vertex_normals", "vertices_within"]
 
 #: the signed axes a view can have as "up", by name
 UP_AXES = {"+z": (0, 0, 1), "+y": (0, 1, 0), "+x": (1, 0, 0),
@@ -91,6 +91,34 @@ class CameraView:
         )
         d = quat_to_matrix(self.wxyz) @ d_cam
         return np.asarray(self.position, dtype=np.float64), d / np.linalg.norm(d)
+
+
+def framing_distance(vertices: np.ndarray, look_at: np.ndarray, toward_eye: np.ndarray,
+                     up: np.ndarray, fov: float, aspect: float, fill: float = 0.7) -> float:
+    """How far from ``look_at`` a camera must sit for the model to fill ``fill`` of the view.
+
+    The camera looks along ``-toward_eye`` (unit) with ``up`` up, vertical field of view
+    ``fov`` (radians) and width / height ``aspect``; the model's extent across the view,
+    measured about ``look_at``, then spans ``fill`` of the height or of the width, whichever
+    is reached first (each vertex at its own depth, in perspective).
+
+    Examples
+    --------
+    >>> V = np.array([[0.0, -1, 0], [0, 1, 0]])       # 2 tall, seen along +z
+    >>> d = framing_distance(V, np.zeros(3), np.array([0.0, 0, 1]), np.array([0.0, 1, 0]),
+    ...                      np.radians(90), 1.0, fill=0.5)
+    >>> round(d, 6)                                    # tan(45 deg) * 0.5 * d = 1
+    2.0
+    """
+    z = np.asarray(toward_eye, np.float64)
+    x = np.cross(np.asarray(up, np.float64), z)
+    x /= np.linalg.norm(x)
+    y = np.cross(z, x)
+    rel = np.asarray(vertices, np.float64) - look_at
+    t = fill * np.tan(fov / 2)
+    # a vertex at depth h towards the eye is seen at |offset| / (d - h) of tan(fov / 2)
+    need = np.maximum(np.abs(rel @ y) / t, np.abs(rel @ x) / (t * aspect)) + rel @ z
+    return float(need.max())
 
 
 def raycast(

@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 import viser
 
+from arapkit import validate
 from arapkit.editor.files import MESH_SUFFIXES
 from arapkit.editor.geometry import UP_AXES
 from arapkit.editor.settings import SolverSettings, solver_choices
@@ -24,12 +25,70 @@ from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, find_tool
 from arapkit.errors import InputError
 
-__all__ = ["MAX_R", "VIEWS", "Panels"]
+__all__ = ["MAX_R", "VIEWS", "Panels", "handle_controls", "next_step"]
 
 VIEWS = ("Shaded", "Rigidity r", "Energy")
-#: the largest r the sliders offer (a rings file may hold more)
-MAX_R = 10
-_FIRST_TOOL = "Select: click"
+#: the largest r the sliders offer: the library's one rule for r
+MAX_R = validate.MAX_RINGS
+_FIRST_TOOL = "Select"
+#: a handle name longer than this is cut short on the buttons that act on it
+_SHOWN_NAME = 24
+_ERROR_MARK = "⚠ "
+
+
+def next_step(state: EditorState) -> str:
+    """The hint at the top of the panel: what to do next with these handles.
+
+    A drag needs a handle to move and one that holds: with only movable handles the
+    whole model follows the drag rigidly, which looks like nothing happens.
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar
+    >>> st = EditorState(bar())
+    >>> "select a region" in next_step(st)
+    True
+    >>> _ = st.add_handle(np.arange(10))
+    >>> "Make fixed handle" in next_step(st)
+    True
+    >>> _ = st.add_handle(np.arange(1100, 1154), frozen=True)
+    >>> next_step(st).startswith("**Next:** drag")
+    True
+    """
+    movable = [h for h in state.handles if not h.frozen]
+    fixed = len(state.handles) - len(movable)
+    if not state.handles:
+        return ("**Next:** select a region (tool *Select*: click, or Shift+drag a "
+                "rectangle), then **Make handle** to move it or **Make fixed handle** to "
+                "pin it.")
+    if not fixed:
+        return ("**Next:** pin a region: select it and press **Make fixed handle** (or "
+                "tick *Frozen* on a handle). With nothing fixed, a drag moves the whole "
+                "model rigidly.")
+    if not movable:
+        return ("**Next:** select the part to move and press **Make handle**, then drag "
+                "its gizmo.")
+    return ("**Next:** drag a gizmo (arrows move, rings turn) to deform; *Undo* is in "
+            "*Session*.")
+
+
+def handle_controls(name: str | None) -> dict[str, str]:
+    """Labels of the controls that act on one handle, naming it (``None``: no handle).
+
+    Examples
+    --------
+    >>> handle_controls("tip")["remove"]
+    'Remove tip'
+    >>> handle_controls(None)["remove"]
+    'Remove handle'
+    """
+    if name is None:
+        return {"heading": "No handle yet.", "rename": "Rename", "frozen": "",
+                "reset": "Reset pose", "remove": "Remove handle"}
+    shown = name if len(name) <= _SHOWN_NAME else name[:_SHOWN_NAME - 1] + "…"
+    return {"heading": f"Handle **{shown}** (yellow dots): the controls below act on it.",
+            "rename": f"Rename {shown}", "frozen": f"Hold {shown} where it is",
+            "reset": f"Reset pose of {shown}", "remove": f"Remove {shown}"}
 
 
 class Panels:
@@ -59,35 +118,41 @@ class Panels:
         self._quiet = False
         gui = self.server.gui
         self.md_status = gui.add_markdown("Starting ...")
+        self._status_ok = ""
+        self.md_hint = gui.add_markdown(next_step(self.state))
+        # at the top: the colour view's legend stays in sight without scrolling
+        self.html_legend = gui.add_html("")
         self.md_mesh = gui.add_markdown("")
         self.md_settings = gui.add_markdown("")
         with gui.add_folder("Tools"):
             self.dd_tool = gui.add_dropdown("Tool", tuple(t.label for t in TOOLS),
                                             initial_value=_FIRST_TOOL)
             self.sl_radius = gui.add_slider("Radius (% size)", 0.5, 30.0, 0.5, 3.0)
-            gui.add_markdown("Click on the mesh to use the tool (Shift+click adds to the "
-                             "selection). Shift+drag: rectangle / brush stroke. Plain drag "
-                             "orbits.")
+            # the one promise every tool keeps; the rest is the chosen tool's own help line
+            gui.add_markdown("Plain drag orbits the camera, scroll zooms.")
             self.md_tool_help = gui.add_markdown(find_tool(_FIRST_TOOL).help)
             self.md_selection = gui.add_markdown("Selected: **0** vertices")
             self.bt_make = gui.add_button("Make handle from selection", icon=viser.Icon.PLUS)
+            self.bt_make_fixed = gui.add_button("Make fixed handle from selection",
+                                                icon=viser.Icon.PIN)
             self.bt_clear_sel = gui.add_button("Clear selection")
         with gui.add_folder("Handles"):
             self.dd_handle = gui.add_dropdown("Handle", ("(none)",))
+            self.md_active = gui.add_markdown(handle_controls(None)["heading"])
             self.tx_name = gui.add_text("Name", "")
             self.bt_rename = gui.add_button("Rename")
             self.cb_frozen = gui.add_checkbox("Frozen (fixed)", False)
             self.bt_reset = gui.add_button("Reset pose")
             self.bt_remove = gui.add_button("Remove handle", color="red")
         with gui.add_folder("Rigidity"):
-            self.sl_global = gui.add_slider("Global r", 1, MAX_R, 1, 1)
-            self.sl_paint = gui.add_slider("Paint r", 1, MAX_R, 1, 3)
+            marks = tuple(r for r in (1, 3, 10, 30, MAX_R) if r <= MAX_R)
+            self.sl_global = gui.add_slider("Global r", 1, MAX_R, 1, 1, marks=marks)
+            self.sl_paint = gui.add_slider("Paint r", 1, MAX_R, 1, 3, marks=marks)
             self.up_rings = gui.add_upload_button("Load rings file", icon=viser.Icon.UPLOAD)
         with gui.add_folder("View"):
             self.dd_view = gui.add_dropdown("Colour", VIEWS, initial_value="Shaded")
             self.dd_up = gui.add_dropdown("Up axis", tuple(UP_AXES), initial_value="+z")
             self.cb_show_handles = gui.add_checkbox("Highlight handles", True)
-            self.html_legend = gui.add_html("")
         with gui.add_folder("Solver"):
             self._build_solver_panel(gui)
         with gui.add_folder("Session"):
@@ -123,6 +188,7 @@ class Panels:
             try:
                 with self.lock:
                     fn(event)
+                    self.clear_error()
             except InputError as exc:
                 self.notify(event, "Cannot do that", str(exc), error=True)
             except Exception as exc:  # a bug, not the user's fault: say so in the page too
@@ -140,7 +206,12 @@ class Panels:
             c.add_notification(title, body, auto_close_seconds=8.0,
                                color="red" if error else "green")
         if error:
-            self.status(f"⚠ {body}")
+            self.md_status.content = f"{_ERROR_MARK}{body}"
+
+    def clear_error(self) -> None:
+        """An action succeeded: an error line left in the status gives way to the last news."""
+        if self.md_status.content.startswith(_ERROR_MARK):
+            self.md_status.content = self._status_ok
 
     def quietly(self, fn: Callable[[], None]) -> None:
         """Run ``fn`` with the widget callbacks muted (setting values, not user actions)."""
@@ -154,6 +225,7 @@ class Panels:
     def _bind_panel_events(self) -> None:
         ui = self.ui
         self.bt_make.on_click(ui(lambda e: self._make_handle()))
+        self.bt_make_fixed.on_click(ui(lambda e: self._make_handle(frozen=True)))
         self.bt_clear_sel.on_click(ui(lambda e: self._clear_selection()))
         self.dd_handle.on_update(ui(lambda e: self._select_handle(self.dd_handle.value)))
         self.bt_rename.on_click(ui(lambda e: self._rename()))
@@ -204,6 +276,12 @@ class Panels:
         h = self.state.handle(self.active) if self.active else None
         self.tx_name.value = h.name if h else ""
         self.cb_frozen.value = bool(h and h.frozen)
+        labels = handle_controls(self.active)
+        self.md_active.content = labels["heading"]
+        # the checkbox's label column is narrow: it names the handle in its tooltip
+        self.bt_rename.label, self.cb_frozen.hint = labels["rename"], labels["frozen"] or None
+        self.bt_reset.label, self.bt_remove.label = labels["reset"], labels["remove"]
+        self.md_hint.content = next_step(self.state)
 
     def sync_history(self) -> None:
         """Enable undo / redo as far as there is something to undo / redo."""
@@ -218,8 +296,8 @@ class Panels:
             self.request_solve()
 
     # ---------------------------------------------------------------- widget actions
-    def _make_handle(self) -> None:
-        h = self.state.add_handle()
+    def _make_handle(self, frozen: bool = False) -> None:
+        h = self.state.add_handle(frozen=frozen)
         self.active = h.name
         self.after_edit()
 

@@ -3,7 +3,12 @@
 Each :class:`Tool` is one entry of :data:`TOOLS` with its name, the label of the tool
 selector, a help line, and its handlers: what a click does to the :class:`EditorState`, and
 whether Shift+drag draws a selection rectangle or paints a brush stroke.  The page looks the
-chosen tool up here instead of comparing labels, so a new tool is one entry.
+chosen tool up here instead of comparing labels, so a new tool is one entry, and shows the
+chosen tool's help line, which promises only what that tool does.
+
+The selection tool draws a rectangle on Shift+drag as well as selecting on click: box
+selection is what the default tool of Blender and MeshLab's selection tool do with a drag
+(a plain drag orbits here, so the rectangle takes Shift).
 
 :class:`PointerTools` is the part of :class:`arapkit.editor.app.EditorApp` that turns
 scene events (clicks, rectangles, drags on the mesh) into those handlers.
@@ -13,7 +18,7 @@ Examples
 >>> from arapkit.mesh.shapes import bar
 >>> st = EditorState(bar())
 >>> pick = Pick(point=st.vertices[0], face=None, add=False, radius=0.05, r=3)
->>> find_tool("Select: click").click(st, pick) == len(st.selection) > 0
+>>> find_tool("Select").click(st, pick) == len(st.selection) > 0
 True
 >>> find_tool("fill").click(st, pick), int(st.rings.max())
 (1154, 3)
@@ -88,6 +93,8 @@ class Tool:
         Shift+drag draws a selection rectangle.
     brush : bool
         Shift+drag on the mesh paints a stroke (one undo step).
+    aliases : tuple of str
+        Former labels that :func:`find_tool` still accepts.
     """
 
     name: str
@@ -97,17 +104,16 @@ class Tool:
     paints: bool = False
     rectangle: bool = False
     brush: bool = False
+    aliases: tuple[str, ...] = ()
 
 
 #: every pointer tool, in the order of the tool selector
 TOOLS: tuple[Tool, ...] = (
     Tool("navigate", "Navigate", "Drag orbits the camera; clicks do nothing."),
-    Tool("select", "Select: click",
-         "Click selects the vertices within the radius; Shift+click adds to the selection.",
-         click=_select),
-    Tool("rectangle", "Select: rectangle",
-         "Shift+drag a rectangle to add the vertices inside that face you; click selects.",
-         click=_select, rectangle=True),
+    Tool("select", "Select",
+         "Click selects the vertices within the radius; Shift+click adds to the selection; "
+         "Shift+drag a rectangle adds the vertices inside it that face you.",
+         click=_select, rectangle=True, aliases=("Select: click", "Select: rectangle")),
     Tool("brush", "Paint brush",
          "Click or Shift+drag paints **Paint r** on the vertices within the radius.",
          click=_paint, paints=True, brush=True),
@@ -122,11 +128,11 @@ def find_tool(key: str) -> Tool:
 
     Examples
     --------
-    >>> find_tool("Paint brush").name, find_tool("brush").label
-    ('brush', 'Paint brush')
+    >>> find_tool("Paint brush").name, find_tool("brush").label, find_tool("Select: click").name
+    ('brush', 'Paint brush', 'select')
     """
     for t in TOOLS:
-        if key in (t.name, t.label):
+        if key in (t.name, t.label, *t.aliases):
             return t
     raise InputError(f"unknown tool {key!r:.40} (use one of {', '.join(t.label for t in TOOLS)})")
 
@@ -136,7 +142,8 @@ class PointerTools:
 
     Uses the app's ``server``, ``state``, ``lock``, ``diag``, ``edge_length``, the panel
     widgets ``dd_tool``, ``md_tool_help``, ``sl_radius``, ``sl_paint``, and its methods
-    ``mesh_nodes``, ``draw_markers``, ``show_points``, ``after_edit``, ``notify`` and ``ui``.
+    ``mesh_nodes``, ``draw_markers``, ``show_points``, ``after_edit``, ``notify``,
+    ``clear_error`` and ``ui``.
     """
 
     server: Any
@@ -152,6 +159,7 @@ class PointerTools:
     draw_markers: Callable[[], None]
     mesh_nodes: Callable[[], list[Any]]
     notify: Callable[..., None]
+    clear_error: Callable[[], None]
     show_points: Callable[..., None]
     ui: Callable[[Callable[[Any], None]], Callable[[Any], None]]
 
@@ -164,6 +172,7 @@ class PointerTools:
         scene.on_click()(self._on_click_replace)
         scene.on_click(modifier="shift")(self._on_click_add)
         self.dd_tool.on_update(self.ui(lambda event: self._on_tool_changed()))
+        self._on_tool_changed()  # the first tool's rectangle and help, as for a chosen one
 
     @property
     def tool(self) -> Tool:
@@ -228,6 +237,7 @@ class PointerTools:
                 if hit is None:
                     return
                 self.apply_tool(t.name, hit[1], face=hit[0], add=add)
+                self.clear_error()
         except InputError as exc:
             self.notify(event, "Cannot do that", str(exc), error=True)
 

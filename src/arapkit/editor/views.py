@@ -25,6 +25,8 @@ from arapkit.plots.colors import ENERGY_CMAP, RING_COLORS
 
 ENERGY_BINS = 8
 SHADED_COLOR = (190, 195, 205)
+#: strains below this are not worth a colour: the energy scale never reads lower
+VISIBLE_STRAIN = 1e-3
 
 
 @dataclasses.dataclass(frozen=True)
@@ -41,14 +43,39 @@ def ring_labels(rings: np.ndarray) -> np.ndarray:
     return np.clip(np.asarray(rings, dtype=np.int64), 1, len(RING_COLORS)) - 1
 
 
-def energy_scale(vertex_energy: np.ndarray) -> float:
-    """Upper end of the energy colour bar: the 99th percentile, robust to a few spikes."""
+def energy_floor(unit: float) -> float:
+    """The lowest top of the energy colour bar, for a mesh whose energy unit is ``unit``.
+
+    ``unit`` is the energy of one vertex at rest scale, ``sum_e D_e |e|^2`` over the
+    vertices (what a vertex's term would be if every edge doubled): a uniform strain
+    ``s`` gives about ``s^2 * unit`` per vertex.  Below :data:`VISIBLE_STRAIN` the colours
+    would show round-off and the last digits of a stopped solve, not a deformation.
+
+    Examples
+    --------
+    >>> energy_floor(2.0)
+    2e-06
+    >>> energy_floor(float("nan"))
+    0.0
+    """
+    return VISIBLE_STRAIN**2 * unit if np.isfinite(unit) and unit > 0 else 0.0
+
+
+def energy_scale(vertex_energy: np.ndarray, floor: float = 0.0) -> float:
+    """Top of the energy colour bar: the 99th percentile (robust to a few spikes), at
+    least ``floor`` (:func:`energy_floor`), so that a shape at rest reads uniformly 0.
+
+    Examples
+    --------
+    >>> energy_scale(np.array([1e-12, 3e-12]), floor=1e-6)
+    1e-06
+    """
     e = np.asarray(vertex_energy, dtype=np.float64)
     e = e[np.isfinite(e)]
     if e.size == 0:
-        return 1.0
+        return max(1.0, floor)
     top = float(np.percentile(e, 99))
-    return top if top > 0 else max(float(e.max()), 1e-30)
+    return max(top if top > 0 else max(float(e.max()), 1e-30), floor)
 
 
 def energy_labels(vertex_energy: np.ndarray, vmax: float, bins: int = ENERGY_BINS) -> np.ndarray:
@@ -104,8 +131,24 @@ def rings_legend_html() -> str:
     return "<div style='font-size:0.8em'>r: " + "".join(items) + "</div>"
 
 
-def energy_legend_html(vmax: float, bins: int = ENERGY_BINS) -> str:
-    """Legend of the energy view (bin edges)."""
+def energy_legend_html(vmax: float, bins: int = ENERGY_BINS, floor: float = 0.0,
+                       top: float | None = None) -> str:
+    """Legend of the energy view (bin edges).
+
+    ``floor`` is :func:`energy_floor`; ``top`` the largest vertex energy shown.  When the
+    scale sits on the floor the legend says so, and when every vertex is in the lowest
+    bin it says that the energy is zero to the strain the colours show.
+
+    Examples
+    --------
+    >>> "0 everywhere" in energy_legend_html(1e-6, floor=1e-6, top=4e-10)
+    True
+    """
     cols = energy_colors(bins)
+    head = "<div style='font-size:0.8em'>vertex energy: "
+    strain = f"{100 * VISIBLE_STRAIN:g} %"
+    if top is not None and top < vmax / bins:
+        return head + _swatch(cols[0], f"0 everywhere (strain below {strain})") + "</div>"
     items = [_swatch(cols[0], "0"), _swatch(cols[-1], f"&ge;{vmax * (bins - 1) / bins:.3g}")]
-    return "<div style='font-size:0.8em'>vertex energy: " + "".join(items) + "</div>"
+    note = f" (scale floor: strain {strain})" if floor > 0 and vmax <= floor else ""
+    return head + "".join(items) + note + "</div>"

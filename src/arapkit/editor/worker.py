@@ -85,6 +85,8 @@ class SolveUpdate:
     setup_ms: float = 0.0
     #: what the deformer says about the input, worded for the editor (e.g. raw cotangent drift)
     notes: tuple[str, ...] = ()
+    #: the energy's unit per vertex, ``sum_e D_e |e|^2 / n`` at rest (nan: not known)
+    energy_unit: float = float("nan")
 
 
 class _Engine:
@@ -317,7 +319,7 @@ class SolveWorker:
         self._emit(
             req, V, res.energy, res.iterations, bool(res.converged), True,
             vertex_energy=np.asarray(res.vertex_energy), setup_ms=setup,
-            notes=tuple(worded_for(n, "editor") for n in d.notes),
+            notes=tuple(worded_for(n, "editor") for n in d.notes), energy_unit=_energy_unit(d),
         )
         if not live["sent"]:
             self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
@@ -331,6 +333,14 @@ class SolveWorker:
 _ONE_SHOT: dict[str, Callable[[SolveWorker, SolveRequest, float], None]] = {
     "laplacian": SolveWorker._solve_laplacian,
 }
+
+
+def _energy_unit(deformer: Any) -> float:
+    """The rest term of the deformer's energy per vertex, in the caller's units."""
+    p = deformer.problem
+    if p is None:  # not a local/global method
+        return float("nan")
+    return float(p.energy.rest_term * p.scale**2 / p.n_vertices)
 
 
 def _is_input_error(exc: BaseException) -> bool:
