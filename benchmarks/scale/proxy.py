@@ -2,7 +2,9 @@
 
 For each drag of ``common.DRAGS`` (base fixed, top region moved rigidly):
 
-1. the reference: the full mesh solved by ``Deformer(..., accelerate=True)`` to tol 1e-5;
+1. the reference: the full mesh solved by ``Deformer(..., accelerate=True)`` to
+   ``--ref-tol`` (default 1e-5; ``--check-ref`` solves again from the preview to see
+   whether the reference is converged);
 2. the proxy (fast-simplification to ``--proxy`` vertices) gets the same rigid handle
    motions on its vertices whose nearest full vertex is a handle, and is solved with
    r-ring ARAP at the rescaled r (``r_proxy = max(1, round(r * h_full / h_proxy))``, h the
@@ -106,8 +108,11 @@ def main(argv=None) -> None:
     ap.add_argument("--drags", nargs="+", default=list(DRAGS), choices=list(DRAGS))
     ap.add_argument("--k", nargs="+", type=int, default=[1, 4])
     ap.add_argument("--rings", type=int, default=1)
+    ap.add_argument("--ref-tol", type=float, default=1e-5,
+                    help="tolerance of the reference solve (relative energy decrease)")
+    ap.add_argument("--ref-iter", type=int, default=3000)
     ap.add_argument("--check-ref", action="store_true",
-                    help="also solve to tol 1e-5 from the preview: is the reference converged?")
+                    help="also solve to --ref-tol from the preview: is the reference converged?")
     args = ap.parse_args(argv)
     mesh = dragon() if args.mesh == "dragon" else dragon_decimated(100000)
     V, diag = mesh.vertices, mesh.bounding_box_diagonal
@@ -120,7 +125,7 @@ def main(argv=None) -> None:
     refs, cold = {}, {}
     for kind in args.drags:
         T = drag_targets(V, base, top, kind)
-        refs[kind] = full.solve(T, tol=1e-5, max_iter=3000)
+        refs[kind] = full.solve(T, tol=args.ref_tol, max_iter=args.ref_iter)
         cold[kind] = full.solve(T)  # tol 1e-3, accelerated, from rest
         print(f"{kind}: reference {refs[kind].iterations} it {refs[kind].timings['total_s']:.1f}"
               f" s; from rest to 1e-3 {cold[kind].iterations} it "
@@ -175,8 +180,9 @@ def main(argv=None) -> None:
                                       errors(c.vertices, ref, diag)[0], w.iterations,
                                       w.timings["total_s"], errors(w.vertices, ref, diag)[0]])
                     if args.check_ref:
-                        w5 = full.solve(T, init=X, tol=1e-5, max_iter=3000)
-                        print(f"check {kind}: from the preview to tol 1e-5 {w5.iterations} it, "
+                        w5 = full.solve(T, init=X, tol=args.ref_tol, max_iter=args.ref_iter)
+                        print(f"check {kind}: from the preview to the reference's tol "
+                              f"{w5.iterations} it, "
                               f"max dist to the reference {errors(w5.vertices, ref, diag)[0]:.2e}"
                               f", energy {w5.energy:.6e} vs reference {refs[kind].energy:.6e}",
                               flush=True)
