@@ -12,8 +12,8 @@ child process of its own so that its peak memory (``ru_maxrss``) is its own:
 * ``pyamg-cg``: CG preconditioned by one smoothed-aggregation V-cycle, to a relative
   residual of 1e-8, from zero and warm-started from the previous solution of a slightly
   different right-hand side (as in the local/global loop);
-* ``gravomg``: Gravo MG (geometric multigrid) on the same system, constrained rows made
-  identity rows;
+* ``gravomg``: Gravo MG (geometric multigrid) on the same ``A_ff`` (free vertices'
+  rest positions, identity mass matrix);
 * ``splu``: scipy's SuperLU (a general LU, the fallback everyone has).
 
 Reported: analyse+factorise (or set-up) seconds, one solve of 3 right-hand sides
