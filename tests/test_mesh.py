@@ -138,3 +138,11 @@ def test_gzip_ply_and_snowden(tmp_path):
     p.write_bytes(gzip.compress(ply.encode()))
     m = load_mesh(p)
     assert m.n_vertices == 3 and m.n_faces == 1
+
+
+@pytest.mark.parametrize("faces", [[None], [[], None], [[0, 1, 2], 7], [[0, 1, 2], "012"]])
+def test_a_face_that_is_no_polygon_is_refused_in_one_line(faces):
+    """Found by the hostile-input properties: a face entry that is None, a number or text
+    was a TypeError traceback."""
+    with pytest.raises(InputError, match=r"face \d+ is not a list of vertex indices"):
+        Mesh(np.zeros((3, 3)), faces)

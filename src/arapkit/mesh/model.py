@@ -259,6 +259,11 @@ class Mesh(EdgeTopology):
             )
         if len(faces) == 0:
             raise InputError(f"{self.name}: mesh has no faces")
+        if not (isinstance(faces, np.ndarray) and faces.dtype != object):
+            bad = next((i for i, f in enumerate(faces)
+                        if not isinstance(f, (list, tuple, np.ndarray))), None)
+            if bad is not None:  # None, a number, text: not a polygon
+                raise InputError(f"{self.name}: face {bad} is not a list of vertex indices")
         if not isinstance(faces, np.ndarray) and len(faces) and all(len(f) == 3 for f in faces):
             faces = np.asarray(faces)
         if isinstance(faces, np.ndarray) and faces.ndim == 2:

@@ -97,6 +97,11 @@ class VolumetricDeformer:
         return self._rings
 
     @property
+    def problem(self):
+        """The volume's ARAP problem, on the tet-edge graph (an ``ARAPProblem``)."""
+        return self._inner.problem
+
+    @property
     def energy_is_sum_of_squares(self) -> bool:
         """Whether every edge weight of the volume is >= 0 (so E >= 0)."""
         return self._inner.energy_is_sum_of_squares
