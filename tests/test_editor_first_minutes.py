@@ -15,6 +15,7 @@ from test_editor_browser import (
     CameraView,
     _browser_or_skip,
     _browser_page,
+    _camera_reported,
     example_app,
     wait_for,
 )
@@ -88,7 +89,7 @@ def test_browser_default_tool_draws_the_rectangle_it_promises(tmp_path):
         assert app.wait_idle(120)
         pot, _ = _pot_and_top(app)
         with _browser_page(sync_playwright, app) as (page, client):
-            wait_for(lambda: _reported(client), 30, "the browser to report its camera")
+            wait_for(lambda: _camera_reported(client), 30, "the browser to report its camera")
             start = app.server.initial_camera
             # position and look-at arrive in separate messages: wait for both
             wait_for(lambda: np.allclose(client.camera.position, start.position, atol=1e-3)
@@ -113,13 +114,6 @@ def test_browser_default_tool_draws_the_rectangle_it_promises(tmp_path):
             assert np.allclose(client.camera.position, cam_before, atol=1e-6)
     finally:
         app.stop()
-
-
-def _reported(client) -> bool:
-    try:
-        return client.camera.update_timestamp > 0
-    except AssertionError:  # viser asserts until the browser has sent its camera once
-        return False
 
 
 def test_browser_hint_asks_for_a_fixed_handle(tmp_path):

@@ -2,17 +2,7 @@
 
 The jobs are ordinary batch jobs (:mod:`arapkit.workflows.jobfile`) with inline handle
 groups, so ``arapkit batch --augment N`` writes them as a job file and runs them like any
-other.
-
-Examples
---------
->>> import tempfile, pathlib
->>> from arapkit.io import save_mesh
->>> from arapkit.mesh.shapes import bar
->>> p = pathlib.Path(tempfile.mkdtemp()) / "bar.off"
->>> m = bar(); _ = save_mesh(p, m.vertices, m.faces)
->>> [j["output"] for j in augment_jobs([p], 2, seed=1)]
-['bar-0000.ply', 'bar-0001.ply']
+other. :func:`augment_jobs` has the example.
 """
 
 from __future__ import annotations
