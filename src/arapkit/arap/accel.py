@@ -19,7 +19,7 @@ import numpy as np
 __all__ = ["Anderson"]
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def _push(x, g, f_prev, g_prev, dF, dG, j, k, n_chunks, part_M, part_r):
     """Store column j of dF, dG; shift f_prev, g_prev; partial dots for row j and dF^T f.
 
@@ -43,14 +43,14 @@ def _push(x, g, f_prev, g_prev, dF, dG, j, k, n_chunks, part_M, part_r):
                 part_r[c, i] += dF[i, t] * f
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def _start(x, g, f_prev, g_prev):
     for t in nb.prange(x.shape[0]):
         f_prev[t] = g[t] - x[t]
         g_prev[t] = g[t]
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def _combine(g, dG, theta, out):
     k = theta.shape[0]
     for t in nb.prange(g.shape[0]):

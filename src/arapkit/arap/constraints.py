@@ -133,7 +133,8 @@ def follow_rigidly(mesh: Mesh | EdgeGraph, free: np.ndarray, deformed: np.ndarra
     nearest one of each vertex of C, and the ``k`` nearest its centroid) are fitted by the
     best rigid motion rest -> ``deformed`` (Kabsch), which is then applied to C in place;
     ``rotations`` of C's vertices are set to it. Single vertices stay where they are. C's
-    own energy is 0 before and after, so the solution stays a minimiser.
+    own energy is 0 before and after, so the solution stays a minimiser. A solver that does
+    this after every solve keeps the :class:`Followers` binding instead.
 
     Examples
     --------
@@ -146,27 +147,121 @@ def follow_rigidly(mesh: Mesh | EdgeGraph, free: np.ndarray, deformed: np.ndarra
     >>> (np.round(P[3:] - V[3:], 9) + 0.0).tolist()
     [[5.0, 0.0, 0.0], [5.0, 0.0, 0.0], [5.0, 0.0, 0.0]]
     """
-    from scipy.spatial import cKDTree
+    Followers.of(mesh, free, k).apply(deformed, rotations)
 
-    V = np.asarray(mesh.vertices)
-    labels = mesh.component_labels
-    is_free = np.zeros(len(V), dtype=bool)
-    is_free[free] = True
-    anchored = np.flatnonzero(~is_free)
-    if len(anchored) == 0:
-        return
-    tree = cKDTree(V[anchored])
-    for c in np.unique(labels[free]):
-        members = np.flatnonzero(labels == c)
-        if len(members) < 2:
-            continue
-        near = tree.query(V[members], k=1)[1]
-        centre = tree.query(V[members].mean(axis=0), k=min(k, len(anchored)))[1]
-        a = anchored[np.unique(np.concatenate([np.ravel(near), np.ravel(centre)]))]
-        R, t = rigid_motion(V[a], deformed[a])
-        deformed[members] = V[members] @ R.T + t
+
+@dataclass(frozen=True)
+class Followers:
+    """The rest-time half of :func:`follow_rigidly`: who follows whom, found once.
+
+    Attributes
+    ----------
+    vertices : (m,) int
+        The vertices of the free components of two or more vertices.
+    group : (m,) int
+        Their component, numbered ``0..G-1``.
+    anchors, anchor_group : (a,) int
+        The anchored vertices each component follows, and that component.
+    rest : (n, 3)
+        The rest positions.
+    """
+
+    vertices: np.ndarray
+    group: np.ndarray
+    anchors: np.ndarray
+    anchor_group: np.ndarray
+    rest: np.ndarray
+
+    @classmethod
+    def of(cls, mesh: Mesh | EdgeGraph, free: np.ndarray, k: int = 32) -> Followers:
+        """Bind each free component of ``mesh`` to its nearest anchored vertices at rest.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from arapkit import Mesh
+        >>> V = np.eye(3).tolist() + (np.eye(3) + [0, 0, 2]).tolist()
+        >>> f = Followers.of(Mesh(np.array(V), [[0, 1, 2], [3, 4, 5]]), np.array([3, 4, 5]))
+        >>> f.vertices.tolist(), sorted(set(f.anchors.tolist()))
+        ([3, 4, 5], [0, 1, 2])
+        """
+        from scipy.spatial import cKDTree
+
+        V = np.asarray(mesh.vertices)
+        labels = mesh.component_labels
+        is_free = np.zeros(len(V), dtype=bool)
+        is_free[free] = True
+        anchored = np.flatnonzero(~is_free)
+        members, anchors = [], []
+        if len(anchored):
+            tree = cKDTree(V[anchored])
+            comps = np.unique(labels[free])
+            order = np.argsort(labels, kind="stable")
+            starts = np.searchsorted(labels[order], comps)
+            sizes = np.bincount(labels)[comps]
+            for start, size in zip(starts, sizes):
+                mine = order[start:start + size]
+                if len(mine) < 2:
+                    continue
+                near = tree.query(V[mine], k=1)[1]
+                centre = tree.query(V[mine].mean(axis=0), k=min(k, len(anchored)))[1]
+                members.append(mine)
+                anchors.append(anchored[np.unique(np.concatenate([np.ravel(near),
+                                                                  np.ravel(centre)]))])
+
+        def flat(parts):
+            return (np.concatenate(parts) if parts else np.zeros(0, np.int64),
+                    np.repeat(np.arange(len(parts)), [len(p) for p in parts]))
+        (vs, group), (an, agroup) = flat(members), flat(anchors)
+        return cls(vs, group, an, agroup, V)
+
+    def apply(self, deformed: np.ndarray, rotations: np.ndarray | None = None) -> None:
+        """Move the followers by their anchors' fitted rigid motions (in place)."""
+        if not len(self.vertices):
+            return
+        n = int(self.group.max()) + 1
+        R, t = rigid_motions(self.rest[self.anchors], deformed[self.anchors],
+                             self.anchor_group, n)
+        g = self.group
+        deformed[self.vertices] = np.einsum("vij,vj->vi", R[g], self.rest[self.vertices]) + t[g]
         if rotations is not None:
-            rotations[members] = R
+            rotations[self.vertices] = R[g]
+
+
+def rigid_motions(src: np.ndarray, dst: np.ndarray, group: np.ndarray,
+                  n_groups: int) -> tuple[np.ndarray, np.ndarray]:
+    """Per group, the rigid motion best mapping its points ``src`` onto ``dst`` (Kabsch).
+
+    Returns ``(R, t)``, (G, 3, 3) and (G, 3), each ``det R = +1`` minimising
+    ``sum |src @ R.T + t - dst|^2`` over the group's points (a group without points gets
+    the identity).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> src = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+    >>> R, t = rigid_motions(np.vstack([src, src]), np.vstack([src + 1, src[:, [1, 0, 2]]]),
+    ...                      np.array([0, 0, 0, 1, 1, 1]), 2)
+    >>> t[0].tolist(), (np.round(np.linalg.det(R), 12) + 0.0).tolist()
+    ([1.0, 1.0, 1.0], [1.0, 1.0])
+    """
+    count = np.maximum(np.bincount(group, minlength=n_groups), 1).astype(np.float64)
+
+    def means(P):
+        return np.stack([np.bincount(group, P[:, a], n_groups) for a in range(3)], 1) \
+            / count[:, None]
+
+    ms, md = means(src), means(dst)
+    S, D = src - ms[group], dst - md[group]
+    H = np.stack([np.stack([np.bincount(group, S[:, a] * D[:, b], n_groups)
+                            for b in range(3)], 1) for a in range(3)], 1)
+    U, _, Vt = np.linalg.svd(H)
+    d = np.sign(np.linalg.det(np.transpose(Vt, (0, 2, 1)) @ np.transpose(U, (0, 2, 1))))
+    d[d == 0] = 1.0
+    Vd = np.transpose(Vt, (0, 2, 1)).copy()
+    Vd[:, :, 2] *= d[:, None]
+    R = Vd @ np.transpose(U, (0, 2, 1))
+    return R, md - np.einsum("gij,gj->gi", R, ms)
 
 
 def rigid_motion(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -182,11 +277,8 @@ def rigid_motion(src: np.ndarray, dst: np.ndarray) -> tuple[np.ndarray, np.ndarr
     >>> (np.round(R, 12) + 0.0).tolist(), t.tolist()
     ([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]], [2.0, 2.0, 2.0])
     """
-    ms, md = src.mean(axis=0), dst.mean(axis=0)
-    U, _, Vt = np.linalg.svd((src - ms).T @ (dst - md))
-    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T)) or 1.0])
-    R = Vt.T @ D @ U.T
-    return R, md - ms @ R.T
+    R, t = rigid_motions(src, dst, np.zeros(len(src), dtype=np.int64), 1)
+    return R[0], t[0]
 
 
 def _flush_c_stdio() -> None:

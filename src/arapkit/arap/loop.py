@@ -17,7 +17,7 @@ import numpy as np
 from ..errors import InputError
 from ..validate import iteration_cap, tolerance
 from .accel import Anderson
-from .constraints import follow_rigidly, rigid_motion
+from .constraints import rigid_motion
 
 __all__ = ["ROUNDOFF_ULPS", "Result", "energy_floor", "local_global", "rigid_start"]
 
@@ -279,7 +279,7 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
     if problem.free_components == "follow" and len(problem.fixed_extra):
         # components without handles: energy 0 at rest and under any rigid motion; place
         # them with their neighbours rather than leave them behind
-        follow_rigidly(problem.caller_graph, problem.fixed_extra, V, Rv)
+        problem.followers.apply(V, Rv)
     V *= s
     if not np.isfinite(V).all():
         check_finite(math.nan, it)

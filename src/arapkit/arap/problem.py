@@ -29,7 +29,7 @@ import numpy as np
 
 from ..errors import Advice, InputError
 from ..mesh.weights import SOUND_WEIGHTS
-from .constraints import Elimination, anchor_components, check_handles
+from .constraints import Elimination, Followers, anchor_components, check_handles
 from .energies import energy_info, make_energy
 from .graph import EdgeGraph, bandwidth_order, check_graph, unit_scale
 from .rings import check_rings
@@ -250,6 +250,11 @@ class ARAPProblem:
     def constrained(self) -> np.ndarray:
         """Handles then component anchors (caller numbering)."""
         return np.concatenate([self.handles, self.fixed_extra])
+
+    @cached_property
+    def followers(self) -> Followers:
+        """Who follows whom in components without handles (caller numbering, found once)."""
+        return Followers.of(self.caller_graph, self.fixed_extra)
 
     @cached_property
     def elimination(self) -> Elimination:

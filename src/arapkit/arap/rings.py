@@ -62,7 +62,7 @@ def vertex_adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     return ptr, dst[order].astype(np.int32), eid[order].astype(np.int32)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _bfs(k, r, adj_ptr, adj_nbr, adj_eid, vstamp, depth, estamp, queue, vout, eout, lout):
     """BFS from k; write disk vertices to vout and (edge, layer) to eout/lout; return counts.
 
@@ -99,7 +99,7 @@ def _bfs(k, r, adj_ptr, adj_nbr, adj_eid, vstamp, depth, estamp, queue, vout, eo
     return tail, ne
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def _count(n, n_edges, rings, adj_ptr, adj_nbr, adj_eid, n_chunks):
     nv = np.zeros(n, dtype=np.int64)
     ne = np.zeros(n, dtype=np.int64)
@@ -119,7 +119,7 @@ def _count(n, n_edges, rings, adj_ptr, adj_nbr, adj_eid, n_chunks):
     return nv, ne
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def _fill(n, rings, adj_ptr, adj_nbr, adj_eid, edges, W, vptr, eptr, n_chunks,
           disk_idx, disk_coef, edge_idx, edge_layer):
     size = (n + n_chunks - 1) // n_chunks

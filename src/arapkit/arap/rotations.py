@@ -438,7 +438,7 @@ def _rotation9(
     )
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", nogil=True)
 def rotation_from_covariance(S: np.ndarray, R: np.ndarray) -> None:
     """Write into ``R`` the rotation maximising ``tr(R @ S)``.
 
@@ -473,7 +473,7 @@ def rotation_from_covariance(S: np.ndarray, R: np.ndarray) -> None:
     R[2, 0], R[2, 1], R[2, 2] = r[6], r[7], r[8]
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", nogil=True)
 def _fit_lanes(src: np.ndarray, dst: np.ndarray, redo: np.ndarray) -> None:
     # Branch-free kernel over _LANES matrices stored structure-of-arrays:
     # src[(3 i + j) * _LANES + q] = S_q[i, j], and likewise dst for R.  The compile-time
@@ -519,7 +519,7 @@ def _fit_lanes(src: np.ndarray, dst: np.ndarray, redo: np.ndarray) -> None:
         redo[q] = not (m > 0.0 and m < math.inf and off <= thr and a11 >= _DEGENERATE * a00)
 
 
-@nb.njit(cache=True, error_model="numpy")
+@nb.njit(cache=True, error_model="numpy", nogil=True)
 def fit_rotation_range(S: np.ndarray, R: np.ndarray, lo: int, hi: int) -> None:
     """Write ``R[lo:hi]`` from ``S[lo:hi]``, vectorised across blocks of matrices.
 
@@ -556,7 +556,7 @@ def fit_rotation_range(S: np.ndarray, R: np.ndarray, lo: int, hi: int) -> None:
                 rotation_from_covariance(tmp, R[k0 + q])
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def _fit_all(S: np.ndarray, R: np.ndarray) -> None:
     n = S.shape[0]
     for c in nb.prange((n + _CHUNK - 1) // _CHUNK):

@@ -127,6 +127,9 @@ class EditorApp(Panels, PointerTools, FileActions):
         self._gizmo_serial = 0
         self._markers: dict[str, Any] = {}
         self.mesh_node: Any = None
+        #: a large mesh's proxy, shown instead of the mesh while a drag is previewed
+        self.proxy_node: Any = None
+        self._proxy_of: Any = None
         #: called as hook(update, perf_counter_when_sent) after each shape is handed to viser
         self.sent_hooks: list[Callable[[SolveUpdate, float], None]] = []
         #: names of uploads dropped while arriving because they were over the cap
@@ -186,6 +189,9 @@ class EditorApp(Panels, PointerTools, FileActions):
             self.last_update = None
             if self.mesh_node is not None:
                 self.mesh_node.remove()
+            if self.proxy_node is not None:
+                self.proxy_node.remove()
+                self.proxy_node = self._proxy_of = None
             self.mesh_node = self.server.scene.add_mesh_simple(
                 "/mesh/shaded", V.astype(np.float32), np.asarray(st.mesh.faces, np.uint32),
                 color=SHADED_COLOR, side="double",
@@ -301,11 +307,45 @@ class EditorApp(Panels, PointerTools, FileActions):
         self.mesh_node.vertices = V32
         for g, node in self._groups:
             node.vertices = V32[g.vertices]
+        self._refresh_markers(V32)
+
+    def _refresh_markers(self, V32: np.ndarray) -> None:
+        """Move the handle and selection dots to ``V32`` (float32 positions)."""
         for key, idx in (("handles", self.state.handle_indices()),
                          ("selection", self.state.selection)):
             node = self._markers.get(key)
             if node is not None and len(idx):
                 node.points = V32[idx]
+
+    def _show_proxy(self, proxy_mesh: Any, P: np.ndarray) -> None:
+        """Draw a large mesh's preview as its proxy (0.24 MB a frame, not 5-21 MB).
+
+        The full mesh is hidden meanwhile and sent once, when the exact shape arrives.
+        """
+        P32 = np.asarray(P, dtype=np.float32)
+        if self.proxy_node is None or self._proxy_of is not proxy_mesh:
+            if self.proxy_node is not None:
+                self.proxy_node.remove()
+            self.proxy_node = self.server.scene.add_mesh_simple(
+                "/mesh/preview", P32, np.asarray(proxy_mesh.faces, np.uint32),
+                color=SHADED_COLOR, side="double")
+            self._proxy_of = proxy_mesh
+        else:
+            self.proxy_node.vertices = P32
+        self.proxy_node.visible = True
+        for node in self.mesh_nodes():
+            node.visible = False
+        self._refresh_markers(self.state.vertices.astype(np.float32))
+
+    def _hide_proxy(self) -> None:
+        if self.proxy_node is None or not self.proxy_node.visible:
+            return
+        self.proxy_node.visible = False
+        if self._groups:
+            for _, node in self._groups:
+                node.visible = True
+        else:
+            self.mesh_node.visible = True
 
     def mesh_nodes(self) -> list[Any]:
         """The scene nodes that show the mesh (shaded, and one per colour of a view)."""
@@ -376,15 +416,19 @@ class EditorApp(Panels, PointerTools, FileActions):
         return tc
 
     # ================================================================ solving
-    def request_solve(self) -> int | None:
-        """Send the current handles/targets/rings to the solver thread (latest wins)."""
+    def request_solve(self, live: bool = False) -> int | None:
+        """Send the current handles/targets/rings to the solver thread (latest wins).
+
+        ``live``: a drag in progress, for which a large mesh's preview is enough.
+        """
         with self.lock:
             st = self.state
             idx, tgt = st.constraints()
             if len(idx) == 0:
                 self.status("No handles yet: see **Next** below.")
                 return None
-            req = SolveRequest(st.mesh, idx, tgt, st.rings, dataclasses.replace(st.settings))
+            req = SolveRequest(st.mesh, idx, tgt, st.rings, dataclasses.replace(st.settings),
+                               live=live)
             return self.worker.submit(req)
 
     def drag_handle(
@@ -402,8 +446,11 @@ class EditorApp(Panels, PointerTools, FileActions):
             same = np.allclose(h.wxyz, wxyz) and np.allclose(h.position, position)
             if not self.state.move_handle(name, wxyz, position, record=phase == "start"):
                 return None
-            # The end of a drag repeats the last pose: let the running solve finish.
-            seq = None if same and phase == "end" else self.request_solve()
+            # The end of a drag repeats the last pose: let the running solve finish, unless
+            # it is a large mesh's preview, whose release still needs the exact solve.
+            release = phase == "end"
+            seq = (None if same and release and not self.worker.previewing
+                   else self.request_solve(live=not release))
             if phase != "update":
                 if self.active != name:
                     self.active = name
@@ -421,10 +468,12 @@ class EditorApp(Panels, PointerTools, FileActions):
             self.last_update = u
             if u.vertex_energy is not None:
                 self.vertex_energy = u.vertex_energy
-            if u.final and self.dd_view.value == "Energy" and u.vertex_energy is not None:
-                self.rebuild_display()
-                self._refresh_vertices(self.state.vertices)
+            if u.proxy_vertices is not None:
+                self._show_proxy(u.proxy_mesh, u.proxy_vertices)
             else:
+                self._hide_proxy()
+                if u.final and self.dd_view.value == "Energy" and u.vertex_energy is not None:
+                    self.rebuild_display()
                 self._refresh_vertices(self.state.vertices)
             sent = time.perf_counter()
             self._status_from(u)

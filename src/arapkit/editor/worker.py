@@ -15,6 +15,16 @@ that shape; from then on it keeps iterating towards convergence but stops at the
 iteration as soon as a newer request is waiting.  So a drag shows a fresh shape after a
 bounded delay, and iterations run to convergence once the user stops moving.
 
+Large meshes
+------------
+When the deformer is coarse to fine (:class:`arapkit.methods.multires.MultiresDeformer`,
+chosen by ``Deformer`` from 100K vertices), a *live* request (a drag in progress) iterates
+only the proxy, in chunks of one frame (:data:`PREVIEW_FRAME_MS`), and each update carries
+the proxy's shape for display (``proxy_mesh``/``proxy_vertices``) beside the skinned full
+one. Any other request (the drag's release, a new handle, a repainted r) first previews
+the same way, then runs ``deformer.solve(targets)``: the exact result, the same computation
+as a script's ``Deformer(...).solve(targets)``.
+
 Examples
 --------
 >>> from arapkit.mesh.shapes import bar, bar_bend
@@ -45,8 +55,14 @@ import numpy as np
 from arapkit.editor.settings import SolverSettings
 from arapkit.errors import worded_for
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.methods.deformer import coarse_to_fine
+from arapkit.methods.multires import MultiresDeformer
 
 LAPLACIAN_WEIGHTS = WEIGHT_KINDS
+#: one preview chunk: proxy iterations run for about this long before a shape is sent;
+#: with the chunk's start-up and the skinning, about 30 shapes a second
+#: (the proxy keeps iterating between drag moves)
+PREVIEW_FRAME_MS = 20.0
 
 
 @dataclasses.dataclass
@@ -59,6 +75,8 @@ class SolveRequest:
     rings: np.ndarray
     settings: SolverSettings
     init: np.ndarray | None = None  # start shape; default: the worker's last shape
+    #: a drag in progress: a large mesh's proxy preview is enough (the release is not live)
+    live: bool = False
     t_submit: float = dataclasses.field(default_factory=time.perf_counter)
     seq: int = 0
 
@@ -87,6 +105,21 @@ class SolveUpdate:
     notes: tuple[str, ...] = ()
     #: the energy's unit per vertex, ``sum_e D_e |e|^2 / n`` at rest (nan: not known)
     energy_unit: float = float("nan")
+    #: a large mesh's preview: the proxy mesh and its shape (what the display draws while
+    #: dragging); None for a full-resolution shape
+    proxy_mesh: Any = None
+    proxy_vertices: np.ndarray | None = None
+
+
+def _build(req: SolveRequest, rings: Any, s: SolverSettings, options: dict) -> Any:
+    from arapkit import Deformer
+
+    background = options.pop("background", False)
+    if background:
+        return MultiresDeformer(req.mesh, req.handles, rings, s.weights, energy=s.method,
+                                tol=s.tol, max_iter=s.max_iter, background=True)
+    return Deformer(req.mesh, req.handles, rings=rings, energy=s.method, weights=s.weights,
+                    tol=s.tol, max_iter=s.max_iter, **options)
 
 
 class _Engine:
@@ -101,8 +134,6 @@ class _Engine:
 
     def deformer_for(self, req: SolveRequest) -> Any:
         """The :class:`arapkit.Deformer` for ``req``, rebuilt only when the set-up changed."""
-        from arapkit import Deformer
-
         s = req.settings
         info = s.info
         # only a method with a rigidity map reads the painted one; the others ignore it
@@ -110,19 +141,24 @@ class _Engine:
         # a volumetric deformer tetrahedralises once per mesh: kept while handles and r change
         key = (id(req.mesh), s.weights, s.method, s.volumetric)
         if self.deformer is None or self._key != key:
-            self.deformer = Deformer(
-                req.mesh, req.handles, rings=rings, energy=s.method, weights=s.weights,
-                tol=s.tol, max_iter=s.max_iter,
-                **({"volumetric": True} if s.volumetric else {}),
-            )
+            options = {"volumetric": True} if s.volumetric else {}
+            if not s.volumetric and coarse_to_fine(req.mesh, None, {"energy": s.method}):
+                # the proxy previews at once; the full factor is built meanwhile
+                options = {"multires": True, "background": True}
+            self.deformer = _build(req, rings, s, options)
             self._key = key
             self.mesh = req.mesh
             return self.deformer
         d = self.deformer
+        changed = False
         if info.rigidity_map and not np.array_equal(d.rings, req.rings):
             d.set_rings(req.rings)
+            changed = True
         if not np.array_equal(d.handles, req.handles):
             d.set_handles(req.handles)
+            changed = True
+        if changed and isinstance(d, MultiresDeformer):
+            d.prepare(background=True)
         return d
 
     def laplacian_editor(self, req: SolveRequest) -> Any:
@@ -165,6 +201,9 @@ class SolveWorker:
         self.latencies: deque[tuple[int, float]] = deque(maxlen=1000)
         self.dropped = 0
         self._last_error: str | None = None
+        #: the last shape sent is a large mesh's proxy preview: a drag's release must
+        #: still be solved exactly, even at the same pose
+        self.previewing = False
 
     # ---------------------------------------------------------------- control
     def start(self) -> None:
@@ -287,6 +326,9 @@ class SolveWorker:
         s = req.settings
         d = self._engine.deformer_for(req)
         setup = (time.perf_counter() - t0) * 1e3
+        if isinstance(d, MultiresDeformer):
+            self._solve_coarse_to_fine(req, d, setup)
+            return
         init = self._start_shape(req)
         live = {"sent": False, "last": 0.0, "count": 0}
 
@@ -323,6 +365,67 @@ class SolveWorker:
         )
         if not live["sent"]:
             self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
+
+    def _solve_coarse_to_fine(self, req: SolveRequest, d: MultiresDeformer,
+                              setup: float) -> None:
+        """A large mesh: proxy previews, then (unless the request is live) the exact solve."""
+        self.previewing = True
+        if not self._preview(req, d, setup) or req.live:
+            return
+        first = {"sent": False, "last": time.perf_counter()}
+
+        def callback(iteration: int, energy: float, vertices: np.ndarray) -> bool:
+            if self.has_newer:
+                return True
+            now = time.perf_counter()
+            if now - first["last"] >= max(self._interval, 1.0):  # 5-20 MB per full shape
+                self._emit(req, np.array(vertices), energy, iteration, False, False)
+                first["last"] = time.perf_counter()
+            return False
+
+        while not d.wait_ready(0.05):  # the full factor: stay open to a newer request
+            if self.has_newer:
+                return
+        res = d.solve(req.targets, callback=callback)
+        V = np.asarray(res.vertices, dtype=np.float64)
+        if self.has_newer and not res.converged:
+            return
+        self._keep(req, V)
+        self.previewing = False
+        self._emit(
+            req, V, res.energy, res.iterations, bool(res.converged), True,
+            vertex_energy=np.asarray(res.vertex_energy), setup_ms=setup,
+            notes=tuple(worded_for(n, "editor") for n in d.notes), energy_unit=_energy_unit(d),
+        )
+
+    def _preview(self, req: SolveRequest, d: MultiresDeformer, setup: float) -> bool:
+        """Iterate the proxy a frame at a time, sending each shape; False if superseded."""
+        count = 0
+        while True:
+            chunk_end = time.perf_counter() + PREVIEW_FRAME_MS / 1e3
+
+            first = count == 0
+
+            def frame(iteration: int, energy: float, vertices: np.ndarray,
+                      chunk_end: float = chunk_end, first: bool = first) -> bool:
+                # a request's first shape is always sent: a fast drag still sees motion
+                return (self.has_newer and not first) or time.perf_counter() >= chunk_end
+
+            p = d.preview(req.targets, callback=frame)
+            count += p.proxy.iterations
+            done = bool(p.proxy.converged)
+            self._keep(req, p.vertices)
+            if self.has_newer and not first:  # the newer targets' shape follows
+                return False
+            self._emit(req, p.vertices, p.proxy.energy, count, done, done and req.live,
+                       setup_ms=setup if count == p.proxy.iterations else 0.0,
+                       proxy_mesh=d.proxy_mesh, proxy_vertices=p.proxy.vertices)
+            if count == p.proxy.iterations:
+                self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
+            if self.has_newer:
+                return False
+            if done:
+                return True
 
     def _keep(self, req: SolveRequest, V: np.ndarray) -> None:
         if np.isfinite(V).all():  # the solver refuses non-finite results; never keep one

@@ -3,4 +3,4 @@
 Importing the package registers every method in :mod:`arapkit.methods.registry`.
 """
 
-from . import deformer, embedded, laplacian, volumetric  # noqa: F401 - registers the methods
+from . import deformer, embedded, laplacian, multires, volumetric  # noqa: F401 - registers the methods

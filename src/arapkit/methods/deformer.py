@@ -50,9 +50,12 @@ from ..validate import integer, iteration_cap, real_array, tolerance
 from .registry import INTERFACES, MethodInfo, MethodOption, method, method_names, methods, register
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
-           "bandwidth_order", "check_method", "register_variant", "unit_scale"]
+           "bandwidth_order", "check_method", "coarse_to_fine", "register_variant", "unit_scale"]
 
 INITS = ("identity", "laplacian")
+#: ``multires=None`` (the default) solves coarse to fine from this many vertices: below it
+#: a plain solve is already interactive, above it hundreds of full iterations are not
+MULTIRES_AUTO_VERTICES = 100_000
 
 
 def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
@@ -63,7 +66,8 @@ def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
     """
     en = energy_info(name)
     return MethodInfo(name, label, local_global=True, descent=en.descent,
-                      rigidity_map=en.rigidity_map, accelerate=en.descent, **kw)
+                      rigidity_map=en.rigidity_map, accelerate=en.descent,
+                      multires=en.descent, **kw)
 
 
 register(_local_global_method("rring", "r-ring ARAP", volumetric=True))
@@ -108,8 +112,9 @@ def _refuse_acceleration(info: MethodInfo, remedy: str = "") -> None:
                          f"descent methods; energy '{info.name}' is not one{remedy}")
 
 
-#: the classes ``Deformer(..., <name>=True)`` returns instead (``volumetric``), registered by
-#: their own modules (:mod:`arapkit.methods.volumetric` registers itself)
+#: the classes ``Deformer(..., <name>=True)`` returns instead (``volumetric``, ``multires``),
+#: registered by their own modules (:mod:`arapkit.methods.volumetric` and
+#: :mod:`arapkit.methods.multires` register themselves)
 _VARIANTS: dict[str, type] = {}
 
 
@@ -127,6 +132,30 @@ def register_variant(flag: str, cls: type) -> type:
     """
     _VARIANTS[flag] = cls
     return cls
+
+
+def coarse_to_fine(mesh: Mesh, multires: bool | None, options: dict) -> bool:
+    """Whether ``Deformer(..., multires=...)`` solves coarse to fine.
+
+    ``None`` (the default) means: for a method that can, on a mesh of at least
+    :data:`MULTIRES_AUTO_VERTICES` vertices, unless the caller asked for a start of its own
+    (``init``) or a partial SR-ARAP region.
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar
+    >>> coarse_to_fine(bar(), None, {}), coarse_to_fine(bar(), True, {})
+    (False, True)
+    """
+    info = method(options.get("energy", "rring"))
+    if multires is None:
+        return (info.multires and mesh.n_vertices >= MULTIRES_AUTO_VERTICES
+                and options.get("init", "identity") == "identity"
+                and options.get("sr_roi") is None)
+    if multires and not info.multires:
+        raise InputError(f"multires=True: energy '{info.name}' cannot be solved coarse to "
+                         "fine (a local/global descent method can)")
+    return bool(multires)
 
 
 def _rows(ptr: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -200,6 +229,13 @@ class Deformer:
         code on CPU tensors) the torch backend of :mod:`arapkit.arap.backends.torch_backend` (extra
         ``arapkit[torch]``; see ``docs/torch.md``); "auto" is "cuda" when torch sees a
         device, else "cpu".
+    multires : bool or None
+        Solve coarse to fine: a decimated proxy (about 20K vertices) previews and starts
+        the full-resolution solve, which then converges by the same test (see
+        :mod:`arapkit.methods.multires`). This returns a
+        :class:`arapkit.methods.multires.MultiresDeformer` (same interface, plus
+        ``preview``). None (the default): on for meshes of at least 100,000 vertices
+        (:data:`MULTIRES_AUTO_VERTICES`) with a method that allows it; False: never.
     volumetric : bool
         Fill the closed surface with tetrahedra and solve r-ring ARAP on the volume's edge
         graph (the course report's "inner edges"); the result is still the surface's. This
@@ -224,11 +260,17 @@ class Deformer:
     """
 
     def __new__(cls, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
-                volumetric: bool = False, density: float | None = None, **options):
+                volumetric: bool = False, density: float | None = None,
+                multires: bool | None = None, **options):
         if not volumetric:
             if density is not None:
                 raise InputError("density is an option of volumetric=True")
+            if coarse_to_fine(mesh, multires, options):
+                return _VARIANTS["multires"](mesh, handles, rings, weights, **options)
             return super().__new__(cls)
+        if multires:
+            raise InputError("multires=True is for surfaces; volumetric=True solves the "
+                             "volume directly")
         energy = options.pop("energy", "rring")
         check_method(energy, options.pop("sr_alpha", None), options.pop("nodes", None),
                      options.pop("sr_roi", None))
@@ -248,6 +290,7 @@ class Deformer:
         *,
         volumetric: bool = False,
         density: float | None = None,
+        multires: bool | None = None,
         energy: str = "rring",
         sr_alpha: float | None = None,
         sr_roi=None,

@@ -77,6 +77,9 @@ class MethodInfo:
         Takes Anderson acceleration.
     volumetric : bool
         Runs on a tetrahedralised volume too (``volumetric=True``).
+    multires : bool
+        Can be solved coarse to fine on a decimated proxy (``multires=True``,
+        :mod:`arapkit.methods.multires`): a local/global descent method.
     handle_tol : float
         How far a handle may end from its target, relative to the bounding-box diagonal:
         0 for hard constraints (eliminated, met to round-off), the soft constraints'
@@ -97,6 +100,7 @@ class MethodInfo:
     rigidity_map: bool = False
     accelerate: bool = False
     volumetric: bool = False
+    multires: bool = False
     handle_tol: float = 0.0
     options: dict[str, MethodOption] = field(default_factory=dict, hash=False)
     interfaces: frozenset[str] = field(default_factory=lambda: frozenset(INTERFACES))

@@ -36,7 +36,7 @@ _NO_ROT = np.zeros((0, 3, 3))
 # -- compiled kernels ---------------------------------------------------------------
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w, S, R, buf,
                win_lo, win_off, partial, rc_ptr, rc_idx, rc_w, R_prev):
     """Fused local step: covariances, rotations and the scatter of the next right-hand side.
@@ -119,7 +119,7 @@ def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w
 
 # Serial on purpose: these are light O(n) passes, and on a shared machine a parallel region
 # costs a scheduler time slice whenever another process holds one of the cores.
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def gather_rhs(buf, win_lo, win_off, chunk_ptr, cover_ptr, cover_idx, slot, fixed_rhs, rhs):
     """``rhs[slot[v]] = b_v - (A_fc C)_v`` for free v, summing the windows that cover v."""
     for c in range(chunk_ptr.shape[0] - 1):
@@ -143,7 +143,7 @@ def gather_rhs(buf, win_lo, win_off, chunk_ptr, cover_ptr, cover_idx, slot, fixe
             rhs[s, 2] = b2
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def scatter_rows(X, idx, P):
     """``P[idx[i]] = X[i]``."""
     for i in range(idx.shape[0]):
@@ -153,7 +153,7 @@ def scatter_rows(X, idx, P):
         P[v, 2] = X[i, 2]
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _windows(chunk_ptr, disk_ptr, disk_idx):
     """Smallest index range each chunk's disks touch."""
     n_chunks = chunk_ptr.shape[0] - 1
@@ -169,7 +169,7 @@ def _windows(chunk_ptr, disk_ptr, disk_idx):
     return lo, hi
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def neighbourhood_energies(P, P0, edges, w, edge_ptr, edge_idx, entry_w, R, out):
     """Each neighbourhood's term, summed edge by edge (no cancellation).
 

@@ -77,7 +77,7 @@ class NeighbourhoodEnergy:
         return self.nbh.rings
 
 
-@nb.njit(parallel=True, cache=True)
+@nb.njit(parallel=True, cache=True, nogil=True)
 def _weighted_edge_norms(P, edges, dw):
     total = 0.0
     for e in nb.prange(edges.shape[0]):

@@ -1,0 +1,530 @@
+"""Coarse-to-fine ARAP for large meshes: a decimated proxy previews and starts the exact solve.
+
+At 0.4–2M vertices one local/global iteration costs 0.1–0.4 s on two cores and the
+low-frequency part of a deformation needs hundreds of them from rest. The same energy on a
+proxy of about 20K vertices (quadric decimation, ``fast-simplification``, MIT) costs a few
+milliseconds per iteration and converges in tens, so:
+
+* **preview** (:meth:`MultiresDeformer.preview`): iterate the proxy, warm-started from its
+  last shape, and map it to the full mesh by rotation-aware skinning: every full vertex
+  ``v`` follows its nearest proxy vertex ``q`` at rest, ``x_v = y_q + R_q (v - q)``, with
+  ``R_q`` the proxy's fitted rotation. A rigid motion of the handles gives a rigid proxy
+  solution (every ``R_q`` that motion's rotation), so the preview is then exact;
+* **solve** (:meth:`MultiresDeformer.solve`): solve the proxy from rest, skin it, and run
+  the full-resolution local/global iteration (Anderson-accelerated) from there. The proxy
+  step is deterministic (same targets, same start), so the editor's result on release and
+  a script's ``Deformer(...).solve(targets)`` are the same computation.
+
+The proxy poses the same problem at its own scale: its handles are the proxy vertices bound
+to handle vertices, moved by the rigid motion fitted to each connected handle region
+(:func:`arapkit.arap.constraints.rigid_motions`) (exact
+for the editor's rigid gizmo moves); its r keeps the surface radius of the full mesh's
+r-ring, ``r_proxy = max(1, round(r * h_full / h_proxy))`` with ``h`` the mean edge length
+(r = 1 stays 1: the proxy is then stiffer than the full mesh, which the full solve undoes).
+``docs/interactive.md`` has the measurements behind each choice.
+
+Examples
+--------
+>>> from arapkit.mesh.shapes import bar, bar_bend
+>>> mesh = bar(segments=(60, 8, 8))
+>>> h, t = bar_bend(mesh, 60)
+>>> d = MultiresDeformer(mesh, h, proxy_vertices=300)
+>>> d.proxy_mesh.n_vertices < mesh.n_vertices
+True
+>>> res = d.solve(t)
+>>> bool(res.converged), res.timings["proxy_iterations"] > 0
+(True, True)
+"""
+
+from __future__ import annotations
+
+import hashlib
+import threading
+import time
+from collections import OrderedDict
+from concurrent.futures import Future, ThreadPoolExecutor
+from concurrent.futures import TimeoutError as FutureTimeout
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from ..arap.constraints import check_handles, check_targets, rigid_motions
+from ..arap.loop import Result
+from ..errors import InputError
+from ..mesh.model import Mesh
+from ..mesh.weights import DEFAULT_WEIGHTS
+from ..validate import MAX_RINGS, integer, ring_sizes
+from .deformer import MULTIRES_AUTO_VERTICES, Deformer, register_variant
+from .registry import method
+
+__all__ = ["AUTO_MIN_VERTICES", "DEFAULT_PROXY_VERTICES", "Binding", "MultiresDeformer",
+           "Preview", "decimate", "proxy_rings"]
+
+#: proxy size: its iteration (5–8 ms on two cores) leaves room for a 30 Hz frame
+DEFAULT_PROXY_VERTICES = 20_000
+#: ``Deformer(..., multires=None)`` (the default) turns coarse-to-fine on from this size
+AUTO_MIN_VERTICES = MULTIRES_AUTO_VERTICES
+#: the proxy's own stopping test in :meth:`MultiresDeformer.solve`: tighter than the full
+#: solve's, since its iterations are cheap and every one saves full-resolution ones
+PROXY_TOL = 1e-5
+PROXY_MAX_ITER = 2000
+#: decimated proxies kept in memory, by content hash (re-opening a mesh skips decimation)
+_CACHE_SIZE = 4
+_cache: OrderedDict[str, tuple[np.ndarray, np.ndarray]] = OrderedDict()
+_cache_lock = threading.Lock()
+
+
+def _content_key(mesh: Mesh, n_target: int) -> str:
+    h = hashlib.sha1()
+    for a in (np.ascontiguousarray(mesh.vertices, dtype=np.float64),
+              np.ascontiguousarray(mesh.faces, dtype=np.int64)):
+        h.update(a.tobytes())
+    h.update(str(n_target).encode())
+    return h.hexdigest()
+
+
+def decimate(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> Mesh:
+    """A proxy of about ``n_target`` vertices by quadric decimation (deterministic, cached).
+
+    Unreferenced vertices the decimator leaves are dropped. A mesh already at most twice
+    ``n_target`` is returned as it is: decimating it would save less than it costs.
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar
+    >>> m = bar(segments=(60, 8, 8))
+    >>> p = decimate(m, 300)
+    >>> 200 < p.n_vertices < 400 and p.name.endswith("proxy")
+    True
+    """
+    n_target = integer(n_target, "proxy_vertices", lo=100)
+    if mesh.n_vertices <= 2 * n_target:
+        return mesh
+    key = _content_key(mesh, n_target)
+    with _cache_lock:
+        hit = _cache.get(key)
+        if hit is not None:
+            _cache.move_to_end(key)
+    if hit is None:
+        import fast_simplification
+
+        # writable copies: the wrapper refuses read-only arrays; 2 faces per vertex
+        U, G = fast_simplification.simplify(np.array(mesh.vertices, dtype=np.float32),
+                                            np.array(mesh.faces, dtype=np.int64),
+                                            target_count=2 * n_target)
+        used = np.zeros(len(U), dtype=bool)
+        used[G.ravel()] = True
+        new = np.cumsum(used) - 1
+        hit = (np.asarray(U, dtype=np.float64)[used], new[G].astype(np.int64))
+        with _cache_lock:
+            _cache[key] = hit
+            while len(_cache) > _CACHE_SIZE:
+                _cache.popitem(last=False)
+    return Mesh(hit[0], hit[1], name=f"{mesh.name} proxy")
+
+
+@numba.njit(parallel=True, cache=True, nogil=True)
+def _skin(Y, R, idx, D, out):  # pragma: no cover - compiled
+    for v in numba.prange(idx.shape[0]):
+        q = idx[v]
+        for a in range(3):
+            out[v, a] = Y[q, a] + R[q, a, 0] * D[v, 0] + R[q, a, 1] * D[v, 1] \
+                + R[q, a, 2] * D[v, 2]
+
+
+@dataclass(frozen=True)
+class Binding:
+    """How the full mesh and its proxy correspond at rest.
+
+    Attributes
+    ----------
+    idx : (n,) int64
+        The nearest proxy vertex of each full vertex (what the full vertex follows).
+    offsets : (n, 3)
+        ``v - q`` at rest, for the skinning ``x_v = y_q + R_q (v - q)``.
+    near_full : (m,) int64
+        The nearest full vertex of each proxy vertex (where the proxy reads r and handles).
+    """
+
+    idx: np.ndarray
+    offsets: np.ndarray
+    near_full: np.ndarray
+
+    @classmethod
+    def between(cls, full: np.ndarray, proxy: np.ndarray) -> Binding:
+        """Bind ``full`` (n, 3) rest positions to ``proxy`` (m, 3) ones by k-d trees.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> b = Binding.between(np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]),
+        ...                     np.array([[0.1, 0, 0], [2.1, 0, 0]]))
+        >>> b.idx.tolist(), b.near_full.tolist()
+        ([0, 0, 1], [0, 2])
+        """
+        idx = cKDTree(proxy).query(full, k=1)[1].astype(np.int64)
+        near = cKDTree(full).query(proxy, k=1)[1].astype(np.int64)
+        return cls(idx, np.ascontiguousarray(full - proxy[idx]), near)
+
+    def skin(self, Y: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Full positions from proxy positions ``Y`` (m, 3) and rotations ``R`` (m, 3, 3).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> b = Binding.between(np.array([[0.0, 0, 0], [1, 0, 0]]), np.array([[0.0, 0, 0]]))
+        >>> Rz = np.array([[[0.0, -1, 0], [1, 0, 0], [0, 0, 1]]])
+        >>> b.skin(np.array([[5.0, 0, 0]]), Rz).tolist()
+        [[5.0, 0.0, 0.0], [5.0, 1.0, 0.0]]
+        """
+        out = np.empty((len(self.idx), 3))
+        _skin(np.ascontiguousarray(Y, dtype=np.float64), np.ascontiguousarray(R, np.float64),
+              self.idx, self.offsets, out)
+        return out
+
+
+def _can_overlap() -> bool:
+    """Whether numba's parallel kernels may run on two threads at once.
+
+    Its ``workqueue`` layer (where neither OpenMP nor TBB is found) is not thread-safe:
+    there the full problem is built when first needed instead of beside the preview.
+    """
+    try:
+        return numba.threading_layer() != "workqueue"
+    except ValueError:  # no parallel kernel has run yet: unknown, so no
+        return False
+
+
+def _mean_edge(mesh: Mesh) -> float:
+    E = mesh.edges
+    return float(np.linalg.norm(mesh.vertices[E[:, 0]] - mesh.vertices[E[:, 1]],
+                                axis=1).mean())
+
+
+def proxy_rings(rings: np.ndarray, near_full: np.ndarray, scale: float) -> np.ndarray:
+    """The proxy's r per vertex: the full r where it is bound, scaled by ``h_full / h_proxy``.
+
+    An r-ring then covers about the same surface on both meshes (at least r = 1).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> proxy_rings(np.array([1, 5, 9]), np.array([0, 1, 2]), 0.25).tolist()
+    [1, 1, 2]
+    """
+    r = np.rint(np.asarray(rings, dtype=np.float64)[near_full] * scale)
+    return np.clip(r, 1, MAX_RINGS).astype(np.int32)
+
+
+def _handle_regions(mesh: Mesh, handles: np.ndarray) -> np.ndarray:
+    """The connected region (of the handle vertices' own edges) of each handle."""
+    pos = np.full(mesh.n_vertices, -1, dtype=np.int64)
+    pos[handles] = np.arange(len(handles))
+    E = mesh.edges
+    both = (pos[E[:, 0]] >= 0) & (pos[E[:, 1]] >= 0)
+    a, b = pos[E[both, 0]], pos[E[both, 1]]
+    n = len(handles)
+    graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
+    return connected_components(graph, directed=False)[1]
+
+
+@dataclass
+class Preview:
+    """One preview: the proxy's shape and, mapped from it, the full mesh's.
+
+    Attributes
+    ----------
+    vertices : (n, 3)
+        The full mesh's preview (skinned; handles at their targets).
+    proxy : Result
+        The proxy solve (its ``vertices`` are what the editor draws while dragging).
+    """
+
+    vertices: np.ndarray
+    proxy: Result
+
+
+class MultiresDeformer:
+    """ARAP on a large mesh, coarse to fine: what ``Deformer(..., multires=True)`` returns.
+
+    Same interface as :class:`arapkit.Deformer` (``solve``, ``set_handles``,
+    ``set_rings``, ``prepare``, ``problem``, ``notes``), plus :meth:`preview`. ``solve``
+    returns the full-resolution result, converged by the full mesh's own test, started from
+    the skinned proxy solution.
+
+    Parameters
+    ----------
+    mesh, handles, rings, weights :
+        As for :class:`arapkit.Deformer`.
+    proxy_vertices : int
+        The proxy's size (default :data:`DEFAULT_PROXY_VERTICES`).
+    background : bool
+        Build the full-resolution problem and its factor on a background thread (the
+        editor: the proxy can preview at once); :meth:`solve` waits for it.
+    **options
+        :class:`arapkit.Deformer`'s other options, for the full-resolution solve.
+        ``accelerate`` defaults to True here (Anderson acceleration on both levels).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from arapkit.mesh.shapes import bar, bar_bend
+    >>> mesh = bar(segments=(60, 8, 8))
+    >>> h, t = bar_bend(mesh, 60)
+    >>> d = MultiresDeformer(mesh, h, proxy_vertices=300)
+    >>> p = d.preview(t)
+    >>> p.vertices.shape == mesh.vertices.shape
+    True
+    """
+
+    def __init__(self, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
+                 proxy_vertices: int = DEFAULT_PROXY_VERTICES, background: bool = False,
+                 **options) -> None:
+        energy = options.get("energy", "rring")
+        if not method(energy).multires:
+            raise InputError(f"multires: energy '{energy}' cannot be solved coarse to fine "
+                             "(use multires=False)")
+        t0 = time.perf_counter()
+        self.mesh = mesh
+        self.energy = energy
+        self.handles = check_handles(mesh, handles)
+        self._rings = ring_sizes(rings, mesh.n_vertices)
+        self._weights = weights
+        self._options = {"accelerate": True, **options}
+        self.tol = self._options.get("tol", 1e-3)
+        self.proxy_mesh = decimate(mesh, proxy_vertices)
+        self.binding = Binding.between(np.asarray(mesh.vertices, dtype=np.float64),
+                                       self.proxy_mesh.vertices)
+        self._scale = _mean_edge(mesh) / max(_mean_edge(self.proxy_mesh), 1e-300)
+        self._map_handles()
+        # the proxy poses the full problem's method and weights; its parts without a
+        # handle follow, whatever the full mesh does with its own
+        self.proxy = Deformer(self.proxy_mesh, self._proxy_handles, self._proxy_rings(),
+                              weights, energy=energy, accelerate=True,
+                              free_components="follow", multires=False,
+                              **{k: v for k, v in options.items()
+                                 if k in ("sr_alpha", "history")})
+        self.proxy.prepare()
+        # compiles (or loads) the skinning kernel now rather than at the first preview
+        self.binding.skin(self.proxy_mesh.vertices,
+                          np.broadcast_to(np.eye(3), (self.proxy_mesh.n_vertices, 3, 3)))
+        self._open_s = time.perf_counter() - t0
+        self._proxy_shape: np.ndarray | None = None
+        self._full: Deformer | None = None
+        self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="arapkit-full")
+        self._pending: Future | None = None
+        if background:
+            self.prepare(background=True)
+
+    # -- the full-resolution problem, built lazily or in the background --------------
+    def _build_full(self) -> Deformer:
+        if self._full is None:
+            self._full = Deformer(self.mesh, self.handles, self._rings, self._weights,
+                                  multires=False, **self._options)
+        else:
+            if not np.array_equal(self._full.handles, self.handles):
+                self._full.set_handles(self.handles)
+            if not np.array_equal(self._full.rings, self._rings):
+                self._full.set_rings(self._rings)
+        self._full.prepare()
+        return self._full
+
+    @property
+    def full(self) -> Deformer:
+        """The full-resolution :class:`arapkit.Deformer` (waits for a background build)."""
+        if self._pending is not None:
+            self._pending.result()
+            self._pending = None
+        if self._full is None or not np.array_equal(self._full.handles, self.handles) or \
+                not np.array_equal(self._full.rings, self._rings):
+            self._build_full()
+        return self._full
+
+    @property
+    def full_ready(self) -> bool:
+        """Whether the full-resolution factor is built (no wait in :meth:`solve`)."""
+        return (self._pending is None or self._pending.done()) and self._full is not None \
+            and np.array_equal(self._full.handles, self.handles) \
+            and np.array_equal(self._full.rings, self._rings)
+
+    def wait_ready(self, timeout: float) -> bool:
+        """Wait up to ``timeout`` s for the full factor (built in the background if needed).
+
+        Lets a caller stay responsive while a large factor is being built.
+        """
+        if self.full_ready:
+            return True
+        if self._pending is None:
+            self._pending = self._pool.submit(self._build_full)
+        try:
+            self._pending.result(timeout)
+        except FutureTimeout:
+            return False
+        return self.full_ready
+
+    def prepare(self, background: bool = False) -> None:
+        """Build the full-resolution factor now (or on a background thread, where safe)."""
+        if background:
+            if _can_overlap():
+                self._pending = self._pool.submit(self._build_full)
+        else:
+            _ = self.full
+
+    # -- what the proxy sees ------------------------------------------------------------
+    def _map_handles(self) -> None:
+        """Proxy handles: proxy vertices bound to a handle, each with its handle region."""
+        H = self.handles
+        pos = np.full(self.mesh.n_vertices, -1, dtype=np.int64)
+        pos[H] = np.arange(len(H))
+        near = self.binding.near_full
+        q1 = np.flatnonzero(pos[near] >= 0)
+        q = np.concatenate([q1, self.binding.idx[H]])
+        src = np.concatenate([pos[near[q1]], np.arange(len(H))])
+        self._proxy_handles, first = np.unique(q, return_index=True)
+        self._last_targets: tuple[np.ndarray, np.ndarray] | None = None
+        self._rest_handles = np.asarray(self.mesh.vertices, dtype=np.float64)[H]
+        self._region = _handle_regions(self.mesh, H)
+        self._n_regions = int(self._region.max()) + 1 if len(H) else 0
+        self._proxy_region = self._region[src[first]]
+
+    def _proxy_rings(self) -> np.ndarray:
+        return proxy_rings(self._rings, self.binding.near_full, self._scale)
+
+    def proxy_targets(self, targets: np.ndarray) -> np.ndarray:
+        """Targets of the proxy's handles: each handle region's fitted rigid motion.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from arapkit.mesh.shapes import bar, bar_bend
+        >>> mesh = bar(segments=(60, 8, 8))
+        >>> h, t = bar_bend(mesh, 0)
+        >>> d = MultiresDeformer(mesh, h, proxy_vertices=300)
+        >>> Q = d.proxy_mesh.vertices
+        >>> bool(np.allclose(d.proxy_targets(t), Q[d.proxy.handles]))
+        True
+        """
+        return self._proxy_targets(check_targets(self.handles, targets))
+
+    def _proxy_targets(self, T: np.ndarray) -> np.ndarray:
+        # a drag sends the same targets chunk after chunk: fit them once
+        last = self._last_targets
+        if last is not None and last[0].shape == T.shape and np.array_equal(last[0], T):
+            return last[1]
+        R, t = rigid_motions(self._rest_handles, T, self._region, self._n_regions)
+        g = self._proxy_region
+        Q = self.proxy_mesh.vertices[self._proxy_handles]
+        out = np.einsum("vij,vj->vi", R[g], Q) + t[g]
+        self._last_targets = (T.copy(), out)
+        return out
+
+    # -- configuration ------------------------------------------------------------------
+    def set_handles(self, handles) -> None:
+        """Use a new handle set: the proxy is refactorised now, the full mesh lazily."""
+        self.handles = check_handles(self.mesh, handles)
+        self._map_handles()
+        self.proxy.set_handles(self._proxy_handles)
+        self.proxy.prepare()
+        self._proxy_shape = None
+
+    def set_rings(self, rings) -> None:
+        """Use a new rigidity map: the proxy's is rebuilt now, the full mesh's lazily."""
+        self._rings = ring_sizes(rings, self.mesh.n_vertices)
+        self.proxy.set_rings(self._proxy_rings())
+        self.proxy.prepare()
+
+    # -- the Deformer interface ---------------------------------------------------------
+    @property
+    def rings(self) -> np.ndarray:
+        """r per vertex of the full mesh."""
+        return self._rings
+
+    @property
+    def problem(self):
+        """The full-resolution ARAP problem (built on first use)."""
+        return self.full.problem
+
+    @property
+    def energy_is_sum_of_squares(self) -> bool:
+        """Whether the full problem's weights are all >= 0 (so E >= 0)."""
+        return self.full.energy_is_sum_of_squares
+
+    @property
+    def notes(self) -> list[str]:
+        """What was done about the input: the proxy, then the full problem's notes."""
+        pm = self.proxy_mesh
+        return [f"coarse to fine: a {pm.n_vertices}-vertex proxy (opened in "
+                f"{self._open_s:.1f} s) starts the full solve"] + self.full.notes
+
+    @property
+    def timings(self) -> dict[str, float]:
+        """The full problem's precomputation times, plus ``proxy_open_s``."""
+        return {**self.full.timings, "proxy_open_s": self._open_s}
+
+    def vertex_energy(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """See :meth:`arapkit.Deformer.vertex_energy` (the full problem's)."""
+        return self.full.vertex_energy(P, R)
+
+    # -- solving ------------------------------------------------------------------------
+    def preview(self, targets, max_iter: int | None = None, tol: float = 1e-4,
+                callback=None, restart: bool = False) -> Preview:
+        """Iterate the proxy from its last shape and map it to the full mesh.
+
+        Parameters
+        ----------
+        targets : (h, 3)
+            The full handles' targets.
+        max_iter : int, optional
+            Proxy iterations at most (a frame's budget); default: to ``tol``.
+        tol : float
+            The proxy's stopping test.
+        callback : callable(iteration, energy, proxy_vertices) -> bool, optional
+            As for :meth:`arapkit.Deformer.solve`, on the proxy.
+        restart : bool
+            Start the proxy from rest instead of its last shape.
+        """
+        T = check_targets(self.handles, targets)
+        start = None if restart or self._proxy_shape is None else self._proxy_shape
+        res = self.proxy.solve(self._proxy_targets(T), init=start, tol=tol,
+                               max_iter=max_iter or PROXY_MAX_ITER, callback=callback)
+        self._proxy_shape = res.vertices
+        X = self.binding.skin(res.vertices, res.rotations)
+        X[self.handles] = T
+        return Preview(X, res)
+
+    def coarse_start(self, targets) -> tuple[np.ndarray, Result]:
+        """The full solve's start: the proxy solved from rest to :data:`PROXY_TOL`, skinned."""
+        T = check_targets(self.handles, targets)
+        res = self.proxy.solve(self._proxy_targets(T), init="identity", tol=PROXY_TOL,
+                               max_iter=PROXY_MAX_ITER)
+        X = self.binding.skin(res.vertices, res.rotations)
+        X[self.handles] = T
+        return X, res
+
+    def solve(self, targets, init=None, tol: float | None = None,
+              max_iter: int | None = None, callback=None,
+              accelerate: bool | None = None) -> Result:
+        """Deform so that the handles reach ``targets``; see :meth:`arapkit.Deformer.solve`.
+
+        With ``init=None`` the full solve starts from the skinned proxy solution (coarse to
+        fine); an array or ``"identity"``/``"laplacian"`` starts it there instead, as for
+        :class:`arapkit.Deformer`. ``timings`` gains ``proxy_s`` and ``proxy_iterations``.
+        """
+        t0 = time.perf_counter()
+        proxy_its = 0
+        if init is None:
+            init, pres = self.coarse_start(targets)
+            proxy_its = pres.iterations
+        t_proxy = time.perf_counter() - t0
+        res = self.full.solve(targets, init=init, tol=tol, max_iter=max_iter,
+                              callback=callback, accelerate=accelerate)
+        res.timings.update(proxy_s=t_proxy, proxy_iterations=proxy_its,
+                           total_s=time.perf_counter() - t0)
+        return res
+
+
+register_variant("multires", MultiresDeformer)
