@@ -86,6 +86,9 @@ class SolverSettings:
     live_max_iter: int = 8
     live_budget_ms: float = 60.0
     volumetric: bool = False
+    #: coarse to fine (a proxy previews while dragging): None decides by the mesh's size
+    #: (:func:`arapkit.methods.deformer.coarse_to_fine`)
+    multires: bool | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.method, str):
@@ -131,6 +134,9 @@ class SolverSettings:
         if not isinstance(s.volumetric, bool):
             raise InputError(f"session solver: volumetric must be true or false, got "
                              f"{s.volumetric!r:.40}")
+        if s.multires is not None and not isinstance(s.multires, bool):
+            raise InputError(f"session solver: multires must be true, false or null, got "
+                             f"{s.multires!r:.40}")
         if s.volumetric and not s.info.volumetric:
             raise InputError(f"session solver: method {s.method!r} has no volumetric form")
         if not isinstance(s.weights, str) or s.weights not in WEIGHT_KINDS:

@@ -139,10 +139,10 @@ class _Engine:
         # only a method with a rigidity map reads the painted one; the others ignore it
         rings = req.rings if info.rigidity_map else 1
         # a volumetric deformer tetrahedralises once per mesh: kept while handles and r change
-        key = (id(req.mesh), s.weights, s.method, s.volumetric)
+        key = (id(req.mesh), s.weights, s.method, s.volumetric, s.multires)
         if self.deformer is None or self._key != key:
             options = {"volumetric": True} if s.volumetric else {}
-            if not s.volumetric and coarse_to_fine(req.mesh, None, {"energy": s.method}):
+            if not s.volumetric and coarse_to_fine(req.mesh, s.multires, {"energy": s.method}):
                 # the proxy previews at once; the full factor is built meanwhile
                 options = {"multires": True, "background": True}
             self.deformer = _build(req, rings, s, options)

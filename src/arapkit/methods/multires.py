@@ -269,6 +269,17 @@ class MultiresDeformer:
         :class:`arapkit.Deformer`'s other options, for the full-resolution solve.
         ``accelerate`` defaults to True here (Anderson acceleration on both levels).
 
+    Attributes
+    ----------
+    proxy_mesh : Mesh
+        The decimated proxy.
+    proxy : Deformer
+        The proxy's own solver (its handles are :meth:`proxy_targets`' rows).
+    binding : Binding
+        How full and proxy vertices correspond at rest.
+    edge_ratio : float
+        ``h_full / h_proxy``, the mean edge lengths' ratio that scales r onto the proxy.
+
     Examples
     --------
     >>> import numpy as np
@@ -299,7 +310,7 @@ class MultiresDeformer:
         self.proxy_mesh = decimate(mesh, proxy_vertices)
         self.binding = Binding.between(np.asarray(mesh.vertices, dtype=np.float64),
                                        self.proxy_mesh.vertices)
-        self._scale = _mean_edge(mesh) / max(_mean_edge(self.proxy_mesh), 1e-300)
+        self.edge_ratio = _mean_edge(mesh) / max(_mean_edge(self.proxy_mesh), 1e-300)
         self._map_handles()
         # the proxy poses the full problem's method and weights; its parts without a
         # handle follow, whatever the full mesh does with its own
@@ -392,7 +403,7 @@ class MultiresDeformer:
         self._proxy_region = self._region[src[first]]
 
     def _proxy_rings(self) -> np.ndarray:
-        return proxy_rings(self._rings, self.binding.near_full, self._scale)
+        return proxy_rings(self._rings, self.binding.near_full, self.edge_ratio)
 
     def proxy_targets(self, targets: np.ndarray) -> np.ndarray:
         """Targets of the proxy's handles: each handle region's fitted rigid motion.

@@ -1,0 +1,249 @@
+"""Coarse-to-fine ARAP (arapkit.methods.multires): previews, the exact solve, the editor path.
+
+The mesh is a 44K-vertex bar, decimated to a 20K proxy: big enough for a real proxy, small
+enough to factor in a second. Oracles: a rigid motion applied by hand, a fresh solver for
+the same problem, scipy's Kabsch (``Rotation.align_vectors``), and the plain full
+solve from rest on the real scan.
+"""
+
+from __future__ import annotations
+
+import types
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from arapkit import Deformer, InputError
+from arapkit.arap.constraints import rigid_motions
+from arapkit.mesh.shapes import bar, bar_bend
+from arapkit.methods.deformer import MULTIRES_AUTO_VERTICES, coarse_to_fine
+from arapkit.methods.multires import MultiresDeformer, decimate
+
+from conftest import data_path
+
+
+@pytest.fixture(scope="module")
+def big():
+    mesh = bar(segments=(450, 24, 24))
+    h, t = bar_bend(mesh, 90)
+    return mesh, h, t
+
+
+@pytest.fixture(scope="module")
+def multi(big):
+    mesh, h, _ = big
+    return MultiresDeformer(mesh, h)
+
+
+def _diag(mesh):
+    return mesh.bounding_box_diagonal
+
+
+def test_the_proxy_is_a_real_decimation(big, multi):
+    mesh = big[0]
+    assert 40_000 < mesh.n_vertices and 15_000 < multi.proxy_mesh.n_vertices < 25_000
+    # every proxy vertex is used by a face, and every full vertex is bound near it
+    assert np.unique(multi.proxy_mesh.faces).size == multi.proxy_mesh.n_vertices
+    assert np.linalg.norm(multi.binding.offsets, axis=1).max() < 0.02 * _diag(mesh)
+
+
+def test_auto_choice_by_size_and_method():
+    at = types.SimpleNamespace(n_vertices=MULTIRES_AUTO_VERTICES)
+    below = types.SimpleNamespace(n_vertices=MULTIRES_AUTO_VERTICES - 1)
+    assert coarse_to_fine(at, None, {}) and not coarse_to_fine(below, None, {})
+    assert coarse_to_fine(at, None, {"energy": "spokes-and-rims"})
+    # methods that are not local/global descent, a caller's own start, a partial ROI: plain
+    assert not coarse_to_fine(at, None, {"energy": "embedded"})
+    assert not coarse_to_fine(at, None, {"energy": "sr-arap"})
+    assert not coarse_to_fine(at, None, {"init": "laplacian"})
+    assert not coarse_to_fine(at, False, {})
+    assert coarse_to_fine(below, True, {})
+    with pytest.raises(InputError, match="energy 'embedded' cannot be solved coarse to fine"):
+        coarse_to_fine(below, True, {"energy": "embedded"})
+    m = bar()
+    assert type(Deformer(m, [0], multires=True)) is MultiresDeformer
+    assert type(Deformer(m, [0])) is Deformer
+    with pytest.raises(InputError, match="multires=True is for surfaces"):
+        Deformer(m, [0], volumetric=True, multires=True)
+
+
+def test_rigid_handle_motion_gives_a_rigid_preview_and_result(big):
+    mesh, h, _ = big
+    d = MultiresDeformer(mesh, h)
+    R = Rotation.from_rotvec([0.3, -0.7, 0.4]).as_matrix()
+    t = np.array([0.5, -2.0, 1.0])
+    V = mesh.vertices
+    want = V @ R.T + t
+    p = d.preview(V[h] @ R.T + t)
+    assert np.abs(p.proxy.rotations - R).max() < 1e-10
+    assert np.abs(p.vertices - want).max() < 1e-10 * _diag(mesh)
+    res = d.solve(V[h] @ R.T + t)
+    assert np.abs(res.vertices - want).max() < 1e-10 * _diag(mesh)
+
+
+def test_solve_equals_a_fresh_solver_and_is_deterministic(big, multi):
+    mesh, h, t = big
+    other = MultiresDeformer(mesh, h)
+    assert np.array_equal(other.proxy_mesh.vertices, multi.proxy_mesh.vertices)
+    assert np.array_equal(other.proxy_mesh.faces, multi.proxy_mesh.faces)
+    assert np.array_equal(other.binding.idx, multi.binding.idx)
+    a, b = multi.preview(t, restart=True), other.preview(t, restart=True)
+    assert np.array_equal(a.vertices, b.vertices)
+    ra, rb = multi.solve(t), other.solve(t)
+    assert np.array_equal(ra.vertices, rb.vertices)
+    # whatever the proxy did before (previews of other poses), solve starts it from rest
+    multi.preview(mesh.vertices[h] + 0.3, max_iter=5)
+    assert np.array_equal(multi.solve(t).vertices, ra.vertices)
+
+
+def test_coarse_start_saves_full_iterations_and_reaches_a_lower_energy(big, multi):
+    mesh, h, t = big
+    coarse = multi.solve(t)
+    plain = Deformer(mesh, h, multires=False, accelerate=True).solve(t)
+    assert coarse.converged and plain.converged
+    assert coarse.iterations < plain.iterations
+    assert coarse.energy <= plain.energy * (1 + 1e-3)
+    assert coarse.timings["proxy_iterations"] > 0
+
+
+def test_handle_change_refactors_only_the_proxy_and_matches_a_fresh_factor(big):
+    mesh, h, t = big
+    d = MultiresDeformer(mesh, h)
+    d.solve(t)
+    proxy_factors, full = d.proxy.factorisations, d.full
+    full_factors = full.factorisations
+    keep = h[: len(h) // 2]  # drop the moving end: only the fixed one stays
+    d.set_handles(keep)
+    # the interaction path: the proxy is refactorised, the full mesh is not (yet)
+    assert d.proxy.factorisations == proxy_factors + 1
+    assert full.factorisations == full_factors and not d.full_ready
+    T = mesh.vertices[keep] + [0.0, 0.2, 0.0]
+    fresh = MultiresDeformer(mesh, keep).solve(T)
+    assert np.abs(d.solve(T).vertices - fresh.vertices).max() < 1e-10 * _diag(mesh)
+    assert full.factorisations == full_factors + 1
+
+
+def test_rigidity_map_reaches_the_proxy_at_its_own_scale(big):
+    mesh, h, t = big
+    d = MultiresDeformer(mesh, h, rings=4)
+    scale = d.edge_ratio
+    assert 0.2 < scale < 0.9  # the proxy's edges are longer
+    assert np.all(d.proxy.rings == max(1, round(4 * scale)))
+    r = np.where(mesh.vertices[:, 0] > 3.5, 6, 1)
+    d.set_rings(r)
+    near = d.binding.near_full
+    want = np.clip(np.rint(r[near] * scale), 1, None)
+    assert np.array_equal(d.proxy.rings, want)
+
+
+def test_rigid_motions_match_scipys_kabsch():
+    rng = np.random.default_rng(5)
+    groups = np.repeat(np.arange(4), [3, 7, 20, 1])
+    src = rng.normal(size=(len(groups), 3))
+    dst = np.empty_like(src)
+    rots = Rotation.random(4, random_state=7)
+    for g in range(4):
+        at = groups == g
+        dst[at] = rots[g].apply(src[at]) + g + rng.normal(scale=0.01, size=(at.sum(), 3))
+    R, t = rigid_motions(src, dst, groups, 5)
+    for g in range(3):  # a group of one point has no rotation to find
+        at = groups == g
+        cs, cd = src[at].mean(0), dst[at].mean(0)
+        ref = Rotation.align_vectors(dst[at] - cd, src[at] - cs)[0].as_matrix()
+        assert np.abs(R[g] - ref).max() < 1e-9
+        assert np.abs(t[g] - (cd - ref @ cs)).max() < 1e-9
+    assert np.array_equal(R[4], np.eye(3)) and np.array_equal(t[4], np.zeros(3))
+
+
+def test_small_meshes_are_their_own_proxy():
+    m = bar()
+    assert decimate(m) is m
+
+
+def test_editor_release_is_the_exact_solve(big):
+    """While dragging the worker sends proxy previews; the release sends Deformer's result."""
+    from arapkit.editor.settings import SolverSettings
+    from arapkit.editor.worker import SolveRequest, SolveWorker
+
+    mesh, h, t = big
+    updates = []
+    w = SolveWorker(updates.append)
+    w.start()
+    try:
+        s = SolverSettings(multires=True)
+        rings = np.ones(mesh.n_vertices, int)
+        V = mesh.vertices
+        for k in range(1, 4):  # a drag: three live poses on the way to t
+            T = V[h] + (t - V[h]) * (k / 3)
+            w.submit(SolveRequest(mesh, h, T, rings, s, live=True))
+            assert w.wait_idle(120)
+        live = [u for u in updates if u.error is None]
+        assert live and all(u.proxy_vertices is not None for u in live)
+        assert live[0].proxy_mesh.n_vertices < mesh.n_vertices
+        seq = w.submit(SolveRequest(mesh, h, t, rings, s))
+        assert w.wait_idle(300)
+    finally:
+        w.stop()
+    final = updates[-1]
+    assert final.seq == seq and final.final and final.error is None
+    assert final.proxy_vertices is None
+    want = Deformer(mesh, h, multires=True, tol=s.tol, max_iter=s.max_iter).solve(t)
+    assert np.abs(final.vertices - want.vertices).max() < 1e-9 * _diag(mesh)
+
+
+def test_dragon_converges_within_60_plain_iterations_from_the_proxy():
+    """The 437K scan: default solve (coarse to fine) against the plain accelerated one."""
+    from arapkit import load_mesh
+
+    mesh = load_mesh(data_path("meshes", "dragon_vrip.ply.gz"))
+    V = mesh.vertices
+    order = np.argsort(V[:, 1], kind="stable")
+    k = len(V) // 20
+    base, top = np.sort(order[:k]), np.sort(order[-k:])
+    h = np.concatenate([base, top])
+    c = V[top].mean(0)
+    R = Rotation.from_euler("z", 45, degrees=True).as_matrix()
+    T = np.concatenate([V[base], (V[top] - c) @ R.T + c])
+    d = Deformer(mesh, h)
+    assert isinstance(d, MultiresDeformer)
+    res = d.solve(T)
+    plain = d.full.solve(T, accelerate=True)
+    # a proxy iteration costs about 1/20 of a full one
+    cost = res.iterations + res.timings["proxy_iterations"] * 20_000 / mesh.n_vertices
+    assert res.converged and cost <= 60
+    assert res.energy <= plain.energy * (1 + 1e-3)
+
+
+def test_editor_draws_the_proxy_while_dragging_and_the_exact_mesh_after(big, tmp_path):
+    pytest.importorskip("viser", reason="the editor extra is needed")
+    from arapkit.editor.app import EditorApp
+    from arapkit.editor.state import EditorState
+    from tests.test_editor_browser import free_port
+
+    mesh = big[0]
+    st = EditorState(mesh)
+    st.settings.multires = True
+    x = mesh.vertices[:, 0]
+    st.add_handle(np.flatnonzero(x < x.min() + 0.1), name="base", frozen=True)
+    cap = st.add_handle(np.flatnonzero(x > x.max() - 0.1), name="cap")
+    app = EditorApp(st, port=free_port(), export_dir=tmp_path)
+    try:
+        assert app.wait_idle(300)
+        seen = []
+        app.sent_hooks.append(lambda u, _: seen.append(
+            (u.proxy_vertices is not None, app.proxy_node is not None and app.proxy_node.visible,
+             app.mesh_node.visible)))
+        start = cap.position.copy()
+        for k, phase in enumerate(("start", "update", "update", "end")):
+            app.drag_handle("cap", cap.wxyz, start + [0.0, 0.3 * k, 0.0], phase)
+        assert app.wait_idle(300)
+    finally:
+        app.stop()
+    # while dragging: the proxy drawn, the full mesh hidden; after the release the reverse
+    assert (True, True, False) in seen
+    assert seen[-1] == (False, False, True)
+    idx, tgt = st.constraints()
+    want = Deformer(mesh, idx, multires=True, tol=st.settings.tol,
+                    max_iter=st.settings.max_iter).solve(tgt)
+    assert np.abs(app.served_vertices() - want.vertices).max() < 1e-6 * _diag(mesh)
