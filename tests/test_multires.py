@@ -12,6 +12,7 @@ import types
 
 import numpy as np
 import pytest
+from conftest import data_path
 from scipy.spatial.transform import Rotation
 
 from arapkit import Deformer, InputError
@@ -19,8 +20,6 @@ from arapkit.arap.constraints import rigid_motions
 from arapkit.mesh.shapes import bar, bar_bend
 from arapkit.methods.deformer import MULTIRES_AUTO_VERTICES, coarse_to_fine
 from arapkit.methods.multires import MultiresDeformer, decimate
-
-from conftest import data_path
 
 
 @pytest.fixture(scope="module")
