@@ -21,6 +21,28 @@ Usage::
     python benchmarks/bench_editor.py --quick                # 20 paced steps
 
 Targets (issue #5): median <= 100 ms at r = 1 and <= 200 ms at r = 3 on a ~30K mesh.
+
+Large meshes (``--mesh`` of 100K vertices and more, or ``--subdivide 1`` for the dragon x4)
+are previewed on a proxy while dragging (:mod:`arapkit.methods.multires`); the paced drag
+then also reports:
+
+* ``open s``: from starting the editor to the first shape sent (ready to drag), and
+  ``exact s`` to the initial exact solve (the full factor built);
+* ``upd/s``: shapes handed to viser per second while dragging, and ``client upd/s`` /
+  ``MB/s``: frames carrying a mesh update that reached a websocket client (what a browser
+  receives);
+* ``prev max/p95``: the last preview against the exact result for the same targets, as
+  fractions of the bounding-box diagonal;
+* ``release s``: from the drag's release to the exact result sent;
+* ``handle s``: from adding a handle to the first shape that obeys it;
+* ``peak GiB``: the process's peak resident memory.
+
+Usage for the scan::
+
+    python benchmarks/bench_editor.py --mesh ../shared/data/meshes/dragon_vrip.ply.gz \
+        --rings 1 --steps 20 --rate 20 --modes paced
+    python benchmarks/bench_editor.py --mesh ../shared/data/meshes/dragon_vrip.ply.gz \
+        --subdivide 1 --rings 1 --steps 20 --rate 20 --modes paced
 """
 
 from __future__ import annotations
@@ -71,8 +93,66 @@ def drag_path(start: np.ndarray, diag: float, steps: int) -> list[tuple[np.ndarr
     return poses
 
 
+class FrameCounter:
+    """A websocket client of the editor that timestamps every frame it receives.
+
+    A frame counts as a shape when it carries a mesh node's new vertices (the shaded mesh
+    or the preview proxy): what a browser would draw.
+    """
+
+    def __init__(self, port: int) -> None:
+        import msgpack
+        import viser
+        from websockets.sync.client import connect
+
+        self.ws = connect(f"ws://127.0.0.1:{port}", max_size=None,
+                          subprotocols=[f"viser-v{viser.__version__}"])
+        # viser counts a client once it reports a camera, as the page does
+        self.ws.send(msgpack.packb({
+            "type": "ViewerCameraMessage", "wxyz": [1.0, 0, 0, 0], "position": [0.0, 0, -10],
+            "fov": 1.0, "near": 0.01, "far": 1000.0, "image_height": 480,
+            "image_width": 640, "look_at": [0.0, 0, 0], "up_direction": [0.0, -1, 0]},
+            use_bin_type=True))
+        self.frames: list[tuple[float, int, bool]] = []
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        import zstandard
+
+        dec = zstandard.ZstdDecompressor()
+        while not self._stop:
+            try:
+                frame = self.ws.recv(timeout=0.5)
+            except TimeoutError:
+                continue
+            except Exception:  # the server stopped
+                return
+            t = time.perf_counter()
+            size = int.from_bytes(frame[:8], "little")
+            packed = int.from_bytes(frame[8:16], "little")
+            head = dec.decompress(frame[16:16 + packed], max_output_size=size)
+            shape = b"vertices" in head and (b"/mesh/shaded" in head or b"/mesh/preview" in head)
+            self.frames.append((t, len(frame), shape))
+
+    def close(self) -> None:
+        self._stop = True
+        self.ws.close()
+        self._thread.join(2.0)
+
+
+def peak_gib() -> float:
+    """This process's peak resident memory (VmHWM), GiB."""
+    with open("/proc/self/status") as f:
+        for line in f:
+            if line.startswith("VmHWM:"):
+                return int(line.split()[1]) / 2**20
+    return float("nan")
+
+
 def run_drag(mesh, r: int, steps: int, rate: float, mode: str) -> dict[str, float]:
-    """One scripted drag; returns latency statistics in ms."""
+    """One scripted drag; returns latency statistics in ms (and the large-mesh figures)."""
     from arapkit.editor.app import EditorApp
     from arapkit.editor.state import EditorState
 
@@ -80,12 +160,20 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str) -> dict[str, floa
     base, cap = handle_regions(st.vertices)
     st.add_handle(base, name="base", frozen=True)
     handle = st.add_handle(cap, name="cap")
+    first: list[float] = []
     with tempfile.TemporaryDirectory() as tmp:
+        t_open = time.perf_counter()
         app = EditorApp(st, port=free_port(), export_dir=tmp)
+        app.sent_hooks.append(lambda u, t: first.append(t) if not first else None)
         try:
-            if not app.wait_idle(600):
+            if not app.wait_idle(1800):
                 raise RuntimeError("initial solve did not finish")
+            t_exact = time.perf_counter() - t_open
+            t_first = (first[0] if first else time.perf_counter()) - t_open
+            client = FrameCounter(app.server.get_port())
+            time.sleep(0.5)
             sends: list[tuple[int, float]] = []
+            updates: list = []
             errors: list[str] = []
             sent = threading.Event()
 
@@ -94,6 +182,7 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str) -> dict[str, floa
                     errors.append(u.error)
                 else:
                     sends.append((u.seq, t))
+                    updates.append((u, t))
                 sent.set()
 
             app.sent_hooks.append(hook)
@@ -116,20 +205,50 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str) -> dict[str, floa
                 else:
                     t_next += 1.0 / rate
                     time.sleep(max(0.0, t_next - time.perf_counter()))
-            app.wait_idle(600)
+            t_release = moves[-1][1]
+            app.wait_idle(1800)
+            t_done = time.perf_counter()
             lat = []
-            for seq, t in moves:
+            for seq, t in moves[:-1] if len(moves) > 1 else moves:
                 later = [ts for s, ts in sends if s >= seq and ts >= t]
                 lat.append((min(later) - t) * 1e3)
             final = app.last_update
-            return {
+            out = {
                 "median": float(np.median(lat)),
                 "p95": float(np.percentile(lat, 95)),
                 "max": float(np.max(lat)),
                 "dropped": float(app.worker.dropped),
                 "final_energy": float(final.energy) if final else float("nan"),
                 "final_iterations": float(final.iterations) if final else float("nan"),
+                "open_s": t_first, "exact_s": t_exact, "release_s": t_done - t_release,
             }
+            t0, t1 = moves[0][1], t_release
+            during = [u for u, t in updates if t0 <= t <= t1]
+            out["rate"] = len(during) / (t1 - t0)
+            shapes = [(t, n) for t, n, shape in client.frames if shape and t0 <= t <= t1]
+            out["client_rate"] = len(shapes) / (t1 - t0)
+            out["client_mb_s"] = sum(n for _, n in shapes) / (t1 - t0) / 1e6
+            previews = [u for u, _ in updates if u.proxy_vertices is not None]
+            if previews and final is not None and final.proxy_vertices is None:
+                diag = float(np.linalg.norm(st.vertices.max(0) - st.vertices.min(0)))
+                e = np.linalg.norm(previews[-1].vertices - final.vertices, axis=1) / diag
+                out["prev_max"], out["prev_p95"] = float(e.max()), float(np.percentile(e, 95))
+            # a new handle (a vertex at the middle height, held where it is)
+            y = st.vertices[:, 1]
+            mid = int(np.argmin(np.abs(y - np.median(y))))
+            before = len(sends)
+            t_h = time.perf_counter()
+            st.add_handle([mid], name="pin", frozen=True)
+            seq = app.request_solve()
+            deadline = time.perf_counter() + 600
+            while not any(s2 >= seq for s2, _ in sends[before:]) and \
+                    time.perf_counter() < deadline:
+                time.sleep(0.005)
+            out["handle_s"] = min(t for s2, t in sends[before:] if s2 >= seq) - t_h
+            app.wait_idle(1800)
+            client.close()
+            out["peak_gib"] = peak_gib()
+            return out
         finally:
             app.stop()
 
@@ -142,6 +261,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rate", type=float, default=20.0, help="moves per second when paced")
     ap.add_argument("--modes", nargs="+", default=["paced", "sequential"],
                     choices=["paced", "sequential"])
+    ap.add_argument("--subdivide", type=int, default=0,
+                    help="Loop-subdivide the mesh this many times first (dragon x4: 1)")
     ap.add_argument("--quick", action="store_true",
                     help="20 steps, paced only (what `make bench`/run_all.py --quick use)")
     args = ap.parse_args(argv)
@@ -154,6 +275,14 @@ def main(argv: list[str] | None = None) -> int:
     from arapkit import load_mesh
 
     mesh = load_mesh(args.mesh)
+    if args.subdivide:
+        import trimesh.remesh
+
+        from arapkit import Mesh
+
+        V, F = trimesh.remesh.subdivide_loop(mesh.vertices, mesh.faces,
+                                             iterations=args.subdivide)
+        mesh = Mesh(V, F, name=f"{mesh.name} x{4 ** args.subdivide}")
     print(f"mesh {Path(args.mesh).name}: {mesh.n_vertices:,} vertices, {mesh.n_faces:,} faces; "
           f"{args.steps}-step drag, paced at {args.rate:g} Hz")
     print(f"{'r':>2} {'mode':>10} {'median ms':>10} {'p95 ms':>8} {'max ms':>8} "
@@ -168,6 +297,13 @@ def main(argv: list[str] | None = None) -> int:
             print(f"{r:>2} {mode:>10} {s['median']:>10.1f} {s['p95']:>8.1f} {s['max']:>8.1f} "
                   f"{int(s['dropped']):>8d} {('<=' + format(target, '.0f')) if target else '-':>7} "
                   f"{s['final_energy']:>10.4g} {int(s['final_iterations']):>6d}", flush=True)
+            print(f"   open {s['open_s']:.2f} s (exact {s['exact_s']:.2f} s) · "
+                  f"{s['rate']:.1f} upd/s sent, {s['client_rate']:.1f} upd/s and "
+                  f"{s['client_mb_s']:.1f} MB/s at the client · release -> exact "
+                  f"{s['release_s']:.2f} s · new handle -> shape {s['handle_s']:.2f} s · "
+                  f"preview vs exact max {s.get('prev_max', float('nan')):.4f} p95 "
+                  f"{s.get('prev_p95', float('nan')):.4f} of diag · peak "
+                  f"{s['peak_gib']:.2f} GiB", flush=True)
     return 0 if ok else 1
 
 

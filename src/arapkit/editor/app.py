@@ -335,7 +335,8 @@ class EditorApp(Panels, PointerTools, FileActions):
         self.proxy_node.visible = True
         for node in self.mesh_nodes():
             node.visible = False
-        self._refresh_markers(self.state.vertices.astype(np.float32))
+        # the handle dots stay until the exact shape: on a scan they are 10^4-10^5 points,
+        # more bytes per frame than the proxy itself
 
     def _hide_proxy(self) -> None:
         if self.proxy_node is None or not self.proxy_node.visible:
