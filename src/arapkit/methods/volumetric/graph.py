@@ -171,11 +171,11 @@ def volume_rings(rings, surface: Mesh, graph: Mesh, tm: TetMesh) -> np.ndarray:
     neighbourhood: one rotation over a whole cross-section, which a twist or a bend can only
     satisfy by thinning the limb. Here a surface vertex k gets the largest ``r' <= r_k``
     whose volume ring reaches only surface vertices of its surface ring ``N(k, r_k)``
-    (at least 1: the tet spokes). An interior vertex i is held to the same rule with the
-    surface ring of its nearest surface vertex s: the largest ``r' <= r_s`` whose volume
-    ring reaches only skin of ``N(s, r_s)``. Taking ``r_s`` unchecked gave the inside of a
-    limb rings over its whole cross-section (on the thick bar at r = 3, 99 of 207 interior
-    vertices), the over-stiff core the rule exists to avoid.
+    (at least 1: the tet spokes). An interior vertex i takes the r' of its nearest surface
+    vertex s, held to the same rule: lowered until its volume ring reaches only skin of
+    ``N(s, r_s)``. Taking s's r' unchecked gave the inside of a limb rings over its whole
+    cross-section (on the thick bar at r = 3, 99 of 207 interior vertices), the over-stiff
+    core the rule exists to avoid.
 
     Parameters
     ----------
@@ -216,6 +216,9 @@ def volume_rings(rings, surface: Mesh, graph: Mesh, tm: TetMesh) -> np.ndarray:
             ok = cap >= j
             ok[beyond] = False
             out[ok] = j
+        # and never above the r' of the skin it lies under: deep inside a thick part a ring
+        # reaches less skin, so the check alone would make the core stiffer than its skin
+        out[n:] = np.minimum(out[n:], out[near[n:]])
     return out
 
 
