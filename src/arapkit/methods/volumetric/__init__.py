@@ -23,8 +23,8 @@ Construction (see ``docs/volumetric.md``)
    the system is positive definite.
 4. Per-vertex rigidity r is given on the surface (:func:`volume_rings`): each surface vertex's
    ring on the volume is the largest one that reaches only skin of its surface r-ring (r hops
-   through the inside would span whole cross-sections); interior vertices take the r of their
-   nearest surface vertex (rest positions).
+   through the inside would span whole cross-sections); an interior vertex's ring is held to
+   the surface ring of its nearest surface vertex (rest positions) the same way.
 
 The result is the input surface: the same vertices (deformed, first ``n`` rows of the volume
 solve), the same faces.
@@ -45,6 +45,7 @@ from .graph import (
     DEFAULT_VOLUME_WEIGHTS,
     VOLUME_WEIGHTS,
     extend_rings,
+    nearest_surface_vertex,
     tet_cotangent_weights,
     tet_volume_weights,
     volume_graph,
@@ -98,6 +99,7 @@ __all__ = [
     "lattice_spacing",
     "mesh_volume",
     "morton_codes",
+    "nearest_surface_vertex",
     "run_mesher",
     "save_volume",
     "tet_cotangent_weights",
