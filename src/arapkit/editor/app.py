@@ -465,7 +465,8 @@ class EditorApp(Panels, PointerTools, FileActions):
         with self.lock:
             if u.mesh is not self.state.mesh:
                 return
-            self.state.vertices = np.asarray(u.vertices, dtype=np.float64)
+            if u.vertices is not None:
+                self.state.vertices = np.asarray(u.vertices, dtype=np.float64)
             self.last_update = u
             if u.vertex_energy is not None:
                 self.vertex_energy = u.vertex_energy

@@ -38,6 +38,9 @@ class Handle:
     wxyz: np.ndarray  # gizmo rotation
     position: np.ndarray  # gizmo position; starts at the anchor centroid
     frozen: bool = False
+    #: the last (wxyz, position, anchor, targets): every drag move asks for every handle's
+    #: targets, and on a scan a fixed base holds 10^5 vertices
+    _last: tuple | None = dataclasses.field(default=None, repr=False, compare=False)
 
     @classmethod
     def create(cls, name: str, vertices: np.ndarray, anchor: np.ndarray) -> Handle:
@@ -58,10 +61,18 @@ class Handle:
 
     def targets(self) -> np.ndarray:
         """Target positions of the handle vertices for the current gizmo pose."""
+        last = self._last
+        pose = (self.wxyz.tobytes(), self.position.tobytes())
+        # arrays are replaced, never mutated: the same objects mean the same targets
+        if last is not None and last[0] == pose and last[1] is self.anchor:
+            return last[2]
         R = quat_to_matrix(self.wxyz)
         # einsum, not BLAS: a tall (n, 3) @ (3, 3) product in threaded OpenBLAS took 10x
         # longer while the solver thread kept the other core busy (every drag move)
-        return np.einsum("vj,ij->vi", self.anchor - self.pivot, R) + self.position
+        out = np.einsum("vj,ij->vi", self.anchor - self.pivot, R) + self.position
+        out.flags.writeable = False
+        self._last = (pose, self.anchor, out)
+        return out
 
     def copy(self) -> Handle:
         # Arrays are replaced, never mutated, so sharing them is safe.

@@ -92,7 +92,9 @@ class SolveUpdate:
 
     seq: int
     mesh: Any
-    vertices: np.ndarray
+    #: the full mesh's shape; None for a large mesh's preview before it settles (the
+    #: display then draws ``proxy_vertices``)
+    vertices: np.ndarray | None
     energy: float
     iterations: int
     converged: bool
@@ -411,13 +413,16 @@ class SolveWorker:
                 # a request's first shape is always sent: a fast drag still sees motion
                 return (self.has_newer and not first) or time.perf_counter() >= chunk_end
 
-            p = d.preview(req.targets, callback=frame)
+            # the display draws the proxy: the full mesh is mapped only once it settles
+            p = d.preview(req.targets, callback=frame, full=False)
             count += p.proxy.iterations
             done = bool(p.proxy.converged)
-            self._keep(req, p.vertices)
             if self.has_newer and not first:  # the newer targets' shape follows
                 return False
-            self._emit(req, p.vertices, p.proxy.energy, count, done, done and req.live,
+            V = d.to_full(p.proxy, req.targets) if done else None
+            if V is not None:
+                self._keep(req, V)
+            self._emit(req, V, p.proxy.energy, count, done, done and req.live,
                        setup_ms=setup if count == p.proxy.iterations else 0.0,
                        proxy_mesh=d.proxy_mesh, proxy_vertices=p.proxy.vertices)
             if count == p.proxy.iterations:
