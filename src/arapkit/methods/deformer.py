@@ -236,6 +236,9 @@ class Deformer:
         :class:`arapkit.methods.multires.MultiresDeformer` (same interface, plus
         ``preview``). None (the default): on for meshes of at least 100,000 vertices
         (:data:`MULTIRES_AUTO_VERTICES`) with a method that allows it; False: never.
+    proxy_vertices : int, optional
+        With coarse to fine: the proxy's size (default 20,000; a mesh of at most twice
+        that is its own proxy).
     volumetric : bool
         Fill the closed surface with tetrahedra and solve r-ring ARAP on the volume's edge
         graph (the course report's "inner edges"); the result is still the surface's. This
@@ -261,12 +264,16 @@ class Deformer:
 
     def __new__(cls, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
                 volumetric: bool = False, density: float | None = None,
-                multires: bool | None = None, **options):
+                multires: bool | None = None, proxy_vertices: int | None = None, **options):
         if not volumetric:
             if density is not None:
                 raise InputError("density is an option of volumetric=True")
             if coarse_to_fine(mesh, multires, options):
+                if proxy_vertices is not None:
+                    options["proxy_vertices"] = proxy_vertices
                 return _VARIANTS["multires"](mesh, handles, rings, weights, **options)
+            if proxy_vertices is not None:
+                raise InputError("proxy_vertices is an option of multires=True")
             return super().__new__(cls)
         if multires:
             raise InputError("multires=True is for surfaces; volumetric=True solves the "
@@ -291,6 +298,7 @@ class Deformer:
         volumetric: bool = False,
         density: float | None = None,
         multires: bool | None = None,
+        proxy_vertices: int | None = None,
         energy: str = "rring",
         sr_alpha: float | None = None,
         sr_roi=None,
