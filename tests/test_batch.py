@@ -596,3 +596,26 @@ def test_unwritable_output_folder_is_refused_before_any_job(data, locked, capsys
     assert len(err) == 1 and f"{locked / 'summary.csv'}: cannot write" in err[0]
     assert main(["batch", str(folder / "jobs.jsonl"), "-o", str(locked / "sub"), "-q"]) == 2
     assert f"{locked / 'sub'}: cannot create the output folder" in capsys.readouterr().err
+
+
+def test_a_job_run_in_the_callers_thread_gives_its_thread_count_back(tmp_path):
+    """run_job limits numba's threads for its own solve only (the count is per thread)."""
+    import numba
+
+    from arapkit.io import save_mesh
+    from arapkit.workflows.batch import normalise_job, run_job
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.skip("one numba thread: nothing to limit")
+    m = bar(segments=(20, 2, 2))
+    save_mesh(tmp_path / "bar.off", m.vertices, m.faces)
+    (tmp_path / "h.json").write_text(json.dumps([
+        {"box": {"min": [-1, -1, -1], "max": [0.01, 1, 1]}},
+        {"box": {"min": [6.99, -1, -1], "max": [8, 1, 1]}, "translate": [0, 0, 1]}]))
+    job = normalise_job({"mesh": "bar.off", "handles": "h.json", "output": "o.ply"}, tmp_path)
+    before = numba.get_num_threads()
+    row = run_job(job, tmp_path / "out", threads=1)
+    assert row["status"] == "ok", row["error"]
+    report = json.loads((tmp_path / "out" / "o.ply.json").read_text())
+    assert report["batch"]["numba_threads"] == 1
+    assert numba.get_num_threads() == before

@@ -121,7 +121,8 @@ def _names(requirements: list[str]) -> set[str]:
 def test_core_dependencies_carry_no_gui_or_plotting_stack():
     project = _pyproject()
     core = _names(project["dependencies"])
-    assert core == {"numpy", "scipy", "numba", "cholespy", "trimesh", "tqdm", "plyfile"}
+    assert core == {"numpy", "scipy", "numba", "cholespy", "trimesh", "tqdm", "plyfile",
+                    "fast-simplification"}
     extras = project["optional-dependencies"]
     assert "matplotlib" in _names(extras["plots"])
     assert {"viser", "matplotlib"} <= _names(extras["editor"])

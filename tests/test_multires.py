@@ -246,3 +246,25 @@ def test_editor_draws_the_proxy_while_dragging_and_the_exact_mesh_after(big, tmp
     want = Deformer(mesh, idx, multires=True, tol=st.settings.tol,
                     max_iter=st.settings.max_iter).solve(tgt)
     assert np.abs(app.served_vertices() - want.vertices).max() < 1e-6 * _diag(mesh)
+
+
+def test_deform_command_on_the_scan_is_coarse_to_fine_and_accelerated(tmp_path, capsys):
+    """`arapkit deform` with default options: the same machinery as the library."""
+    import json
+
+    from arapkit.cli import main
+
+    path = data_path("meshes", "dragon_vrip.ply.gz")
+    handles = tmp_path / "bend.json"
+    handles.write_text(json.dumps([
+        {"name": "feet", "box": {"min": [-1, -1, -1], "max": [1, 0.06, 1]}},
+        {"name": "head", "box": {"min": [-1, 0.185, -1], "max": [1, 1, 1]},
+         "rotate": {"axis": [0, 0, 1], "degrees": 30}, "translate": [0.03, 0, 0]}]))
+    out = tmp_path / "bent.ply"
+    assert main(["deform", str(path), "--handles", str(handles), "-o", str(out),
+                 "--report", str(tmp_path / "r.json")]) == 0
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert report["parameters"]["accelerate"] is True
+    assert report["result"]["converged"] and report["result"]["iterations"] <= 60
+    assert report["timings"]["proxy_iterations"] > 0
+    assert "coarse to fine" in capsys.readouterr().err

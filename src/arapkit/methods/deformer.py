@@ -147,7 +147,10 @@ def coarse_to_fine(mesh: Mesh, multires: bool | None, options: dict) -> bool:
     >>> coarse_to_fine(bar(), None, {}), coarse_to_fine(bar(), True, {})
     (False, True)
     """
-    info = method(options.get("energy", "rring"))
+    energy = options.get("energy", "rring")
+    if energy not in method_names("library"):
+        return False  # Deformer itself says which names there are
+    info = method(energy)
     if multires is None:
         return (info.multires and mesh.n_vertices >= MULTIRES_AUTO_VERTICES
                 and options.get("init", "identity") == "identity"
@@ -213,12 +216,14 @@ class Deformer:
         Start from identity rotations (the paper) or from Laplacian editing (the report).
     free_components : {"follow", "fix", "error"}
         What to do with connected components that hold no handle.
-    accelerate : bool
+    accelerate : bool or None
         Anderson acceleration (Peng et al. 2018) of the local/global iteration with an
         energy safeguard: an accelerated iterate is kept only when it lowers the energy,
-        otherwise the plain iterate is used, so the history stays monotone. Off by default
-        so that iterations (and the paper's stopping test) mean plain local/global steps;
-        see ``docs/benchmarks.md`` for when it pays. Not with ``energy="sr-arap"``.
+        otherwise the plain iterate is used, so the history stays monotone. None (the
+        default) is the method's choice: off for a plain solve, so that iterations (and the
+        paper's stopping test) mean plain local/global steps; on for coarse to fine
+        (``multires``) and volumetric solves. See ``docs/benchmarks.md`` for when it pays.
+        Not with ``energy="sr-arap"``.
     history : int
         Anderson history size m.
     reorder : bool
@@ -307,7 +312,7 @@ class Deformer:
         max_iter: int = 1000,
         init: str = "identity",
         free_components: str = "follow",
-        accelerate: bool = False,
+        accelerate: bool | None = None,
         history: int = 5,
         reorder: bool = True,
         device: str = "cpu",
@@ -323,7 +328,8 @@ class Deformer:
         if init not in INITS:
             raise InputError(f"unknown init '{init}' (use {' or '.join(INITS)})")
         self.init = init
-        self.accelerate = bool(accelerate)
+        # None: the method's choice, which for a plain solve is off
+        self.accelerate = None if accelerate is None else bool(accelerate)
         if self.accelerate:
             _refuse_acceleration(info, " (use accelerate=False)")
         self.history = integer(history, "history", lo=1, hi=1000)
@@ -544,7 +550,7 @@ class Deformer:
         T = check_targets(self.handles, targets)
         tol = self.tol if tol is None else tolerance(tol)
         max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
-        accelerate = self.accelerate if accelerate is None else bool(accelerate)
+        accelerate = bool(self.accelerate) if accelerate is None else bool(accelerate)
         if accelerate:
             _refuse_acceleration(method(self.energy))
         if self.embedded is not None:

@@ -319,7 +319,11 @@ class MultiresDeformer:
         self.handles = check_handles(mesh, handles)
         self._rings = ring_sizes(rings, mesh.n_vertices)
         self._weights = weights
-        self._options = {"accelerate": True, **options}
+        # acceleration is part of the machinery here: on unless asked off
+        if options.get("accelerate") is None:
+            options["accelerate"] = True
+        self._options = options
+        self.accelerate = bool(options["accelerate"])
         self.tol = self._options.get("tol", 1e-3)
         self.proxy_mesh = decimate(mesh, proxy_vertices)
         self.binding = Binding.between(np.asarray(mesh.vertices, dtype=np.float64),

@@ -43,7 +43,8 @@ import json
 import os
 import sys
 import time
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Iterator, Sequence
+from contextlib import contextmanager
 from functools import partial
 from pathlib import Path
 from typing import Any
@@ -139,8 +140,8 @@ def _deform_command(job: dict, output: str) -> list[str]:
     for key, flag in (("sr_alpha", "--sr-alpha"), ("nodes", "--nodes"), ("weld", "--weld")):
         if job[key] is not None:
             cmd.append(f"{flag}={job[key]}")
-    if job["accelerate"]:
-        cmd.append("--accelerate")
+    if job["accelerate"] is not None:  # None: the method's choice, as deform's default
+        cmd.append("--accelerate" if job["accelerate"] else "--no-accelerate")
     return [*cmd, "-o", output]
 
 
@@ -161,13 +162,24 @@ def _previous(output: Path, digest: str) -> dict | None:
         return None
 
 
-def _limit_threads(threads: int) -> int:
+@contextmanager
+def _limit_threads(threads: int) -> Iterator[int]:
+    """Run with at most ``threads`` numba threads, then give the caller its own count back.
+
+    The count is per calling thread in numba, so in-process workers do not disturb each
+    other; restoring it matters as much: a batch run in the caller's thread used to leave it
+    on one thread, and the solver's sums (chunked by thread count) then differed in the last
+    bits from the same solve elsewhere.
+    """
     import numba
 
+    saved = numba.get_num_threads()
     threads = max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS))
-    # per calling thread in numba, so in-process workers do not disturb each other
     numba.set_num_threads(threads)
-    return threads
+    try:
+        yield threads
+    finally:
+        numba.set_num_threads(saved)
 
 
 def _row(job: dict, status: str, error: str = "", iterations: Any = "", energy: Any = "",
@@ -213,13 +225,13 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
             res = old["result"]
             return _row(job, "skipped", "", res["iterations"], res["energy"],
                         time.perf_counter() - t0, worker)
-        threads = _limit_threads(threads)
         spec = job_spec(job)
         for f in spec.input_files():
             if Path(f).resolve() == output.resolve():
                 raise InputError(f"{output}: output would overwrite an input file")
-        prepared = prepare_job(spec)
-        res = prepared.solve()
+        with _limit_threads(threads) as threads:
+            prepared = prepare_job(spec)
+            res = prepared.solve()
         output.parent.mkdir(parents=True, exist_ok=True)
         warnings = save_result(output, prepared, res)
         wall = time.perf_counter() - t0
@@ -417,8 +429,8 @@ def _threads_for(slots: dict[str, int]) -> int:
 
 
 def _limited_call(func: Callable, slots: dict[str, int], item: Any) -> Any:
-    _limit_threads(_threads_for(slots))
-    return func(item)
+    with _limit_threads(_threads_for(slots)):
+        return func(item)
 
 
 def dask_map(client) -> Callable:

@@ -166,7 +166,7 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
     if job["init"] not in INITS:
         raise InputError(f"{where}: 'init' must be {' or '.join(INITS)}, "
                          f"got {json.dumps(job['init'])}")
-    if not isinstance(job["accelerate"], bool):
+    if job["accelerate"] is not None and not isinstance(job["accelerate"], bool):
         raise InputError(f"{where}: 'accelerate' must be true or false")
     _check_output(job["output"], where)
     return {k: job[k] for k in JOB_KEYS}

@@ -103,7 +103,7 @@ class DeformJob:
     tol: float = _SOLVER["tol"]
     max_iter: int = _SOLVER["max_iter"]
     init: str = _SOLVER["init"]
-    accelerate: bool = _SOLVER["accelerate"]
+    accelerate: bool | None = _SOLVER["accelerate"]
     energy: str = DEFAULT_ENERGY
     sr_alpha: float | None = _SOLVER["sr_alpha"]
     nodes: int | None = _SOLVER["nodes"]
@@ -342,7 +342,8 @@ def job_report(
             "tol": job.tol,
             "max_iter": job.max_iter,
             "init": job.init,
-            "accelerate": job.accelerate,
+            # as used: None leaves it to the method (coarse to fine and volumetric: on)
+            "accelerate": bool(getattr(prepared.deformer, "accelerate", job.accelerate)),
             **_volume_parameters(job),
         },
         "handles": {

@@ -80,7 +80,10 @@ class VolumetricDeformer:
         t0 = time.perf_counter()
         self.graph, self.w = volume_graph(mesh, tet, weights)
         self._rings = check_rings(rings, mesh.n_vertices)
-        options = {**VOLUME_SOLVE_DEFAULTS, **options}
+        # a None (the Deformer's "method's choice") leaves the volume's default
+        options = {**VOLUME_SOLVE_DEFAULTS,
+                   **{k: v for k, v in options.items() if v is not None or k != "accelerate"}}
+        self.accelerate = bool(options["accelerate"])
         self._inner = Deformer(self.graph, handles, volume_rings(rings, mesh, self.graph, tet),
                                weights=self.w, **options)
         self._graph_ms = 1e3 * (time.perf_counter() - t0)
