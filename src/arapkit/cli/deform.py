@@ -135,7 +135,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         action=argparse.BooleanOptionalAction,
         default=None,
         help="Anderson acceleration with an energy safeguard: fewer, costlier iterations "
-        "(pays on large meshes; see docs/benchmarks.md; default off, on with --volumetric)",
+        "(pays on large meshes; see docs/benchmarks.md; default off, on with --volumetric "
+        "and on meshes of 100,000 vertices or more, which are solved coarse to fine)",
     )
     p.add_argument(
         "-o",
