@@ -191,7 +191,12 @@ class EditorApp(Panels, PointerTools, FileActions):
                 self.mesh_node.remove()
             if self.proxy_node is not None:
                 self.proxy_node.remove()
-                self.proxy_node = self._proxy_of = None
+            # a large mesh's preview draws this node (hidden until then; its faces are set
+            # when the proxy is known)
+            self.proxy_node = self.server.scene.add_mesh_simple(
+                "/mesh/preview", V[:3].astype(np.float32), np.array([[0, 1, 2]], np.uint32),
+                color=SHADED_COLOR, side="double", visible=False)
+            self._proxy_of = None
             self.mesh_node = self.server.scene.add_mesh_simple(
                 "/mesh/shaded", V.astype(np.float32), np.asarray(st.mesh.faces, np.uint32),
                 color=SHADED_COLOR, side="double",
@@ -323,25 +328,23 @@ class EditorApp(Panels, PointerTools, FileActions):
         The full mesh is hidden meanwhile and sent once, when the exact shape arrives.
         """
         P32 = np.asarray(P, dtype=np.float32)
-        if self.proxy_node is None or self._proxy_of is not proxy_mesh:
-            if self.proxy_node is not None:
-                self.proxy_node.remove()
-            self.proxy_node = self.server.scene.add_mesh_simple(
-                "/mesh/preview", P32, np.asarray(proxy_mesh.faces, np.uint32),
-                color=SHADED_COLOR, side="double")
+        node = self.proxy_node
+        node.vertices = P32
+        if self._proxy_of is not proxy_mesh:
+            node.faces = np.asarray(proxy_mesh.faces, np.uint32)
             self._proxy_of = proxy_mesh
-        else:
-            self.proxy_node.vertices = P32
-        self.proxy_node.visible = True
-        for node in self.mesh_nodes():
-            node.visible = False
-        # the handle dots stay until the exact shape: on a scan they are 10^4-10^5 points,
-        # more bytes per frame than the proxy itself
+        node.visible = True
+        # the dots too: moving them would send 10^4-10^5 points a frame on a scan (more
+        # than the proxy), and left in place they mark where the handle no longer is
+        for hidden in self.mesh_nodes() + list(self._markers.values()):
+            hidden.visible = False
 
     def _hide_proxy(self) -> None:
         if self.proxy_node is None or not self.proxy_node.visible:
             return
         self.proxy_node.visible = False
+        for marker in self._markers.values():
+            marker.visible = True
         if self._groups:
             for _, node in self._groups:
                 node.visible = True
