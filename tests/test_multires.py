@@ -268,3 +268,31 @@ def test_deform_command_on_the_scan_is_coarse_to_fine_and_accelerated(tmp_path, 
     assert report["result"]["converged"] and report["result"]["iterations"] <= 60
     assert report["timings"]["proxy_iterations"] > 0
     assert "coarse to fine" in capsys.readouterr().err
+
+
+def test_volumes_and_an_explicit_no_are_never_coarse_to_fine(monkeypatch):
+    """Above the size threshold: a volume's tet graph has no surface to decimate, and the
+    editor's "multires off" means off."""
+    import arapkit.methods.deformer as deformer_module
+    from arapkit.editor.settings import SolverSettings
+    from arapkit.editor.worker import SolveRequest, SolveWorker
+
+    monkeypatch.setattr(deformer_module, "MULTIRES_AUTO_VERTICES", 10)
+    m = bar()
+    h, t = bar_bend(m, 30)
+    assert type(Deformer(m, h)) is MultiresDeformer  # the patched threshold applies
+    from arapkit.methods.volumetric.mesher import have_mesher
+
+    if have_mesher():  # the volume extra (fTetWild)
+        vol = Deformer(m, h, volumetric=True)
+        assert not any(isinstance(x, MultiresDeformer) for x in vars(vol).values())
+        assert bool(np.isfinite(vol.solve(t).vertices).all())
+    updates = []
+    w = SolveWorker(updates.append)
+    w.start()
+    try:
+        w.submit(SolveRequest(m, h, t, np.ones(m.n_vertices, int), SolverSettings(multires=False)))
+        assert w.wait_idle(120)
+    finally:
+        w.stop()
+    assert updates[-1].error is None and updates[-1].proxy_vertices is None

@@ -120,8 +120,9 @@ def _build(req: SolveRequest, rings: Any, s: SolverSettings, options: dict) -> A
     if background:
         return MultiresDeformer(req.mesh, req.handles, rings, s.weights, energy=s.method,
                                 tol=s.tol, max_iter=s.max_iter, background=True)
+    # the engine chose already (coarse_to_fine): not again by size
     return Deformer(req.mesh, req.handles, rings=rings, energy=s.method, weights=s.weights,
-                    tol=s.tol, max_iter=s.max_iter, **options)
+                    tol=s.tol, max_iter=s.max_iter, multires=False, **options)
 
 
 class _Engine:

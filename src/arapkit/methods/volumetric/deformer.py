@@ -84,8 +84,9 @@ class VolumetricDeformer:
         options = {**VOLUME_SOLVE_DEFAULTS,
                    **{k: v for k, v in options.items() if v is not None or k != "accelerate"}}
         self.accelerate = bool(options["accelerate"])
+        # the volume's graph is solved as it is: no surface to decimate into a proxy
         self._inner = Deformer(self.graph, handles, volume_rings(rings, mesh, self.graph, tet),
-                               weights=self.w, **options)
+                               weights=self.w, multires=False, **options)
         self._graph_ms = 1e3 * (time.perf_counter() - t0)
         self.handles = handles
 
