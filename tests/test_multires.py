@@ -296,3 +296,19 @@ def test_volumes_and_an_explicit_no_are_never_coarse_to_fine(monkeypatch):
     finally:
         w.stop()
     assert updates[-1].error is None and updates[-1].proxy_vertices is None
+
+
+def test_waiting_for_the_factor_after_a_change_where_nothing_builds_in_the_background(
+        big, monkeypatch):
+    """Where numba's thread layer forbids a background build, wait_ready builds it itself,
+    also after the handles changed (a finished build for the old ones is not enough)."""
+    import arapkit.methods.multires as multires_module
+
+    mesh, h, _ = big
+    monkeypatch.setattr(multires_module, "_can_overlap", lambda: False)
+    d = MultiresDeformer(mesh, h, background=True)
+    assert d.wait_ready(120) and d.full_ready
+    d.set_handles(h[: len(h) // 2])
+    d.prepare(background=True)  # a no-op here
+    assert not d.full_ready
+    assert d.wait_ready(120) and np.array_equal(d.full.handles, h[: len(h) // 2])

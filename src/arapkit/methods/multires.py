@@ -344,6 +344,10 @@ class MultiresDeformer:
         self._open_s = time.perf_counter() - t0
         self._proxy_shape: np.ndarray | None = None
         self._full: Deformer | None = None
+        # the handles and r change a version; the full problem records the one it was built
+        # for (comparing 10^6-entry arrays on every access cost milliseconds)
+        self._version = 0
+        self._built = -1
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="arapkit-full")
         self._pending: Future | None = None
         if background:
@@ -351,16 +355,21 @@ class MultiresDeformer:
 
     # -- the full-resolution problem, built lazily or in the background --------------
     def _build_full(self) -> Deformer:
+        version, handles, rings = self._version, self.handles, self._rings
         if self._full is None:
-            self._full = Deformer(self.mesh, self.handles, self._rings, self._weights,
-                                  multires=False, **self._options)
+            self._full = Deformer(self.mesh, handles, rings, self._weights, multires=False,
+                                  **self._options)
         else:
-            if not np.array_equal(self._full.handles, self.handles):
-                self._full.set_handles(self.handles)
-            if not np.array_equal(self._full.rings, self._rings):
-                self._full.set_rings(self._rings)
+            if not np.array_equal(self._full.handles, handles):
+                self._full.set_handles(handles)
+            if not np.array_equal(self._full.rings, rings):
+                self._full.set_rings(rings)
         self._full.prepare()
+        self._built = version
         return self._full
+
+    def _stale(self) -> bool:
+        return self._full is None or self._built != self._version
 
     @property
     def full(self) -> Deformer:
@@ -368,17 +377,14 @@ class MultiresDeformer:
         if self._pending is not None:
             self._pending.result()
             self._pending = None
-        if self._full is None or not np.array_equal(self._full.handles, self.handles) or \
-                not np.array_equal(self._full.rings, self._rings):
+        if self._stale():
             self._build_full()
         return self._full
 
     @property
     def full_ready(self) -> bool:
         """Whether the full-resolution factor is built (no wait in :meth:`solve`)."""
-        return (self._pending is None or self._pending.done()) and self._full is not None \
-            and np.array_equal(self._full.handles, self.handles) \
-            and np.array_equal(self._full.rings, self._rings)
+        return (self._pending is None or self._pending.done()) and not self._stale()
 
     def wait_ready(self, timeout: float) -> bool:
         """Wait up to ``timeout`` s for the full factor (built in the background if needed).
@@ -387,7 +393,8 @@ class MultiresDeformer:
         """
         if self.full_ready:
             return True
-        if self._pending is None:
+        # a finished build may be for handles or r changed since: then build again
+        if self._pending is None or self._pending.done():
             self._pending = self._pool.submit(self._build_full)
         try:
             self._pending.result(timeout)
@@ -458,6 +465,7 @@ class MultiresDeformer:
     def set_handles(self, handles) -> None:
         """Use a new handle set: the proxy is refactorised now, the full mesh lazily."""
         self.handles = check_handles(self.mesh, handles)
+        self._version += 1
         self._map_handles()
         self.proxy.set_handles(self._proxy_handles)
         self.proxy.prepare()
@@ -466,6 +474,7 @@ class MultiresDeformer:
     def set_rings(self, rings) -> None:
         """Use a new rigidity map: the proxy's is rebuilt now, the full mesh's lazily."""
         self._rings = ring_sizes(rings, self.mesh.n_vertices)
+        self._version += 1
         self.proxy.set_rings(self._proxy_rings())
         self.proxy.prepare()
 
