@@ -113,16 +113,19 @@ class SolveUpdate:
     proxy_vertices: np.ndarray | None = None
 
 
-def _build(req: SolveRequest, rings: Any, s: SolverSettings, options: dict) -> Any:
+def _build(req: SolveRequest, rings: Any, s: SolverSettings) -> Any:
+    """The deformer the settings ask for: coarse to fine (by size unless the settings say),
+    volumetric or plain."""
     from arapkit import Deformer
 
-    background = options.pop("background", False)
-    if background:
+    if not s.volumetric and coarse_to_fine(req.mesh, s.multires, {"energy": s.method}):
+        # the proxy previews at once; the full factor is built meanwhile
         return MultiresDeformer(req.mesh, req.handles, rings, s.weights, energy=s.method,
                                 tol=s.tol, max_iter=s.max_iter, background=True)
-    # the engine chose already (coarse_to_fine): not again by size
+    # chosen above: not again by size
     return Deformer(req.mesh, req.handles, rings=rings, energy=s.method, weights=s.weights,
-                    tol=s.tol, max_iter=s.max_iter, multires=False, **options)
+                    tol=s.tol, max_iter=s.max_iter, multires=False,
+                    **({"volumetric": True} if s.volumetric else {}))
 
 
 class _Engine:
@@ -144,11 +147,7 @@ class _Engine:
         # a volumetric deformer tetrahedralises once per mesh: kept while handles and r change
         key = (id(req.mesh), s.weights, s.method, s.volumetric, s.multires)
         if self.deformer is None or self._key != key:
-            options = {"volumetric": True} if s.volumetric else {}
-            if not s.volumetric and coarse_to_fine(req.mesh, s.multires, {"energy": s.method}):
-                # the proxy previews at once; the full factor is built meanwhile
-                options = {"multires": True, "background": True}
-            self.deformer = _build(req, rings, s, options)
+            self.deformer = _build(req, rings, s)
             self._key = key
             self.mesh = req.mesh
             return self.deformer
@@ -323,7 +322,7 @@ class SolveWorker:
                              "non-finite positions")
         self._keep(req, V)
         self._emit(req, V, np.nan, 1, True, True, setup_ms=setup)
-        self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
+        self._record_latency(req)
 
     def _solve_iterative(self, req: SolveRequest, t0: float) -> None:
         s = req.settings
@@ -343,7 +342,7 @@ class SolveWorker:
                 if live["count"] >= s.live_max_iter or over_budget:
                     self._emit(req, np.array(vertices), energy, live["count"], False, False,
                                setup_ms=setup)
-                    self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
+                    self._record_latency(req)
                     live["sent"], live["last"] = True, time.perf_counter()
                 return False
             # After the live update: stop for a newer drag, else report now and then.
@@ -361,13 +360,9 @@ class SolveWorker:
             # Superseded: the newer request starts from V and will be shown in a moment;
             # sending V now would only delay it.
             return
-        self._emit(
-            req, V, res.energy, res.iterations, bool(res.converged), True,
-            vertex_energy=np.asarray(res.vertex_energy), setup_ms=setup,
-            notes=tuple(worded_for(n, "editor") for n in d.notes), energy_unit=_energy_unit(d),
-        )
+        self._emit_result(req, d, res, V, setup)
         if not live["sent"]:
-            self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
+            self._record_latency(req)
 
     def _solve_coarse_to_fine(self, req: SolveRequest, d: MultiresDeformer,
                               setup: float) -> None:
@@ -395,11 +390,7 @@ class SolveWorker:
             return
         self._keep(req, V)
         self.previewing = False
-        self._emit(
-            req, V, res.energy, res.iterations, bool(res.converged), True,
-            vertex_energy=np.asarray(res.vertex_energy), setup_ms=setup,
-            notes=tuple(worded_for(n, "editor") for n in d.notes), energy_unit=_energy_unit(d),
-        )
+        self._emit_result(req, d, res, V, setup)
 
     def _preview(self, req: SolveRequest, d: MultiresDeformer, setup: float) -> bool:
         """Iterate the proxy a frame at a time, sending each shape; False if superseded."""
@@ -423,14 +414,27 @@ class SolveWorker:
             if V is not None:
                 self._keep(req, V)
             self._emit(req, V, p.proxy.energy, count, done, done and req.live,
-                       setup_ms=setup if count == p.proxy.iterations else 0.0,
+                       setup_ms=setup if first else 0.0,
                        proxy_mesh=d.proxy_mesh, proxy_vertices=p.proxy.vertices)
-            if count == p.proxy.iterations:
-                self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
+            if first:
+                self._record_latency(req)
             if self.has_newer:
                 return False
             if done:
                 return True
+
+    def _emit_result(self, req: SolveRequest, d: Any, res: Any, V: np.ndarray,
+                     setup: float) -> None:
+        """Send a deformer's final result with its energy colours, notes and energy unit."""
+        self._emit(
+            req, V, res.energy, res.iterations, bool(res.converged), True,
+            vertex_energy=np.asarray(res.vertex_energy), setup_ms=setup,
+            notes=tuple(worded_for(n, "editor") for n in d.notes), energy_unit=_energy_unit(d),
+        )
+
+    def _record_latency(self, req: SolveRequest) -> None:
+        """Note the time from ``req`` to its first shape handed to the publisher."""
+        self.latencies.append((req.seq, (time.perf_counter() - req.t_submit) * 1e3))
 
     def _keep(self, req: SolveRequest, V: np.ndarray) -> None:
         if np.isfinite(V).all():  # the solver refuses non-finite results; never keep one

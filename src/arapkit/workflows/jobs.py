@@ -343,7 +343,7 @@ def job_report(
             "max_iter": job.max_iter,
             "init": job.init,
             # as used: None leaves it to the method (coarse to fine and volumetric: on)
-            "accelerate": bool(getattr(prepared.deformer, "accelerate", job.accelerate)),
+            "accelerate": bool(prepared.deformer.accelerate),
             **_volume_parameters(job),
         },
         "handles": {
