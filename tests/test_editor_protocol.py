@@ -136,3 +136,29 @@ def test_oversized_upload_dropped_as_it_arrives(app, client):
     wait_for(lambda: app.rejected_uploads == ["big.json", "liar.json"], 30, "the second drop")
     assert "t-liar" not in states
     assert app.up_session.value.content == b""  # no upload callback ever saw the bytes
+
+
+def test_the_panels_icons_come_from_one_opening_of_visers_archive(monkeypatch):
+    """The start-up shortcut reads the same icons as viser does, opens the archive once,
+    and leaves viser as it found it."""
+    import zipfile
+
+    from viser import _icons
+
+    from arapkit.editor.panels import _icon_archive_opened_once
+
+    names = ("plus", "pin", "upload", "download")
+    expected = [_icons.svg_from_icon.__wrapped__(n) for n in names]
+    opened: list = []
+    real = zipfile.ZipFile
+
+    class Counting(real):
+        def __init__(self, *a, **k):
+            opened.append(a[0])
+            super().__init__(*a, **k)
+
+    monkeypatch.setattr(zipfile, "ZipFile", Counting)
+    with _icon_archive_opened_once():
+        got = [_icons.svg_from_icon.__wrapped__(n) for n in names]
+    assert got == expected and len(opened) == 1
+    assert _icons.zipfile is zipfile

@@ -15,7 +15,7 @@ import pytest
 from conftest import data_path
 from scipy.spatial.transform import Rotation
 
-from arapkit import Deformer, InputError
+from arapkit import Deformer, InputError, Mesh
 from arapkit.arap.constraints import rigid_motions
 from arapkit.mesh.shapes import bar, bar_bend
 from arapkit.methods.deformer import MULTIRES_AUTO_VERTICES, coarse_to_fine
@@ -312,3 +312,95 @@ def test_waiting_for_the_factor_after_a_change_where_nothing_builds_in_the_backg
     d.prepare(background=True)  # a no-op here
     assert not d.full_ready
     assert d.wait_ready(120) and np.array_equal(d.full.handles, h[: len(h) // 2])
+
+
+def test_a_background_build_is_asked_for_once_per_version(big, monkeypatch):
+    """The editor asks for the full factor on every request: one build per handle set."""
+    import arapkit.methods.multires as multires_module
+
+    mesh, h, _ = big
+    monkeypatch.setattr(multires_module, "_can_overlap", lambda: True)
+    d = MultiresDeformer(mesh, h)
+    d.prepare(background=True)
+    first = d._pending
+    d.prepare(background=True)
+    assert first is not None and d._pending is first
+    assert d.wait_ready(120) and d.full_ready
+    d.prepare(background=True)  # up to date: nothing to build
+    assert d._pending is first
+    d.set_handles(h[: len(h) // 2])
+    d.prepare(background=True)
+    assert d._pending is not first
+    assert d.wait_ready(120) and np.array_equal(d.full.handles, h[: len(h) // 2])
+
+
+def test_decimating_in_a_child_process_gives_the_same_proxy(big):
+    """The child runs the same library on the same arrays: the proxy is bitwise the same,
+    whether the child is asked directly or through start_decimation and decimate."""
+    import arapkit.methods.multires as mr
+
+    mesh = big[0]
+    V, F = mr._decimator_input(mesh)
+    here = mr._simplify(V, F, 5_000)
+    child = mr._run_child(V, F, 5_000)  # raises if the child fails: no silent fallback
+    for a, b in zip(here, child):
+        assert np.array_equal(a, b)
+    key = mr._content_key(mesh, 5_000)
+    with mr._cache_lock:
+        mr._cache.pop(key, None)
+    assert mr.start_decimation(mesh, 5_000)
+    assert not mr.start_decimation(mesh, 5_000)  # already on its way (or done)
+    p = decimate(mesh, 5_000)
+    assert key not in mr._pending and key in mr._cache
+    expected = Mesh(*mr._proxy_arrays(*here))  # the same repairs (degenerate faces dropped)
+    assert np.array_equal(p.vertices, expected.vertices)
+    assert np.array_equal(p.faces, expected.faces)
+    assert not mr.start_decimation(mesh, 5_000)  # cached
+
+
+def test_the_editor_starts_a_large_meshs_proxy_before_solving(big, monkeypatch):
+    """``SolveWorker.expect``: a mesh that will be solved coarse to fine is decimated in a
+    child while the page is set up; a volume or 'multires off' is not."""
+    import arapkit.methods.deformer as deformer_module
+    from arapkit.editor.settings import SolverSettings
+    from arapkit.editor.worker import SolveWorker
+
+    mesh = big[0]
+    monkeypatch.setattr(deformer_module, "MULTIRES_AUTO_VERTICES", 5000)
+    started: list = []
+    monkeypatch.setattr("arapkit.editor.worker.start_decimation",
+                        lambda m, *a: started.append(m) or True)
+    w = SolveWorker(lambda u: None)
+    w.expect(mesh, SolverSettings())
+    w.expect(mesh, SolverSettings(multires=False))
+    w.expect(mesh, SolverSettings(volumetric=True))
+    w.expect(bar(), SolverSettings())  # below the (patched) size: no
+    assert started == [mesh]
+
+
+def test_handle_regions_follow_the_mesh_edges():
+    """Regions from the faces' edges equal connected components of the edge list."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from arapkit.methods.multires import _handle_regions
+
+    mesh = bar(segments=(30, 6, 6))
+    rng = np.random.default_rng(3)
+    h = np.unique(np.concatenate([np.arange(150), rng.choice(mesh.n_vertices, 200)]))
+    pos = np.full(mesh.n_vertices, -1)
+    pos[h] = np.arange(len(h))
+    E = mesh.edges
+    E = E[(pos[E[:, 0]] >= 0) & (pos[E[:, 1]] >= 0)]
+    g = coo_matrix((np.ones(len(E)), (pos[E[:, 0]], pos[E[:, 1]])), shape=(len(h),) * 2)
+    expected = connected_components(g, directed=False)[1]
+    got = _handle_regions(mesh, h)
+    assert got.max() > 5 and np.array_equal(got, expected)
+
+
+def test_mean_edge_length_is_the_mean_over_unique_edges_on_a_closed_mesh():
+    mesh = bar(segments=(10, 3, 2))
+    E = mesh.edges
+    brute = np.mean([np.linalg.norm(mesh.vertices[i] - mesh.vertices[j]) for i, j in E])
+    assert mesh.n_components == 1 and mesh.boundary_loops == []
+    assert mesh.mean_edge_length == pytest.approx(brute, rel=1e-12)

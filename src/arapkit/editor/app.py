@@ -179,11 +179,11 @@ class EditorApp(Panels, PointerTools, FileActions):
         """(Re)create every scene node for ``self.state`` (start-up, new mesh, session)."""
         with self.lock:
             st = self.state
+            self.worker.expect(st.mesh, st.settings)
             V = st.vertices
             lo, hi = V.min(axis=0), V.max(axis=0)
             self.diag = st.mesh.bounding_box_diagonal or 1.0
-            e = np.asarray(st.mesh.edges)
-            self.edge_length = float(np.linalg.norm(V[e[:, 0]] - V[e[:, 1]], axis=1).mean())
+            self.edge_length = st.mesh.mean_edge_length
             self.worker.reset_shape(V, st.mesh)
             self.vertex_energy = None
             self.last_update = None

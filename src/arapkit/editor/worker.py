@@ -56,7 +56,7 @@ from arapkit.editor.settings import SolverSettings
 from arapkit.errors import worded_for
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 from arapkit.methods.deformer import coarse_to_fine
-from arapkit.methods.multires import MultiresDeformer
+from arapkit.methods.multires import MultiresDeformer, start_decimation
 
 LAPLACIAN_WEIGHTS = WEIGHT_KINDS
 #: one preview chunk: proxy iterations run for about this long before a shape is sent;
@@ -113,15 +113,21 @@ class SolveUpdate:
     proxy_vertices: np.ndarray | None = None
 
 
+def _coarse_to_fine(mesh: Any, s: SolverSettings) -> bool:
+    """Whether ``mesh`` is solved coarse to fine with these settings (by size unless they
+    say; never a volume, whose tet graph has no surface to decimate)."""
+    return not s.volumetric and coarse_to_fine(mesh, s.multires, {"energy": s.method})
+
+
 def _build(req: SolveRequest, rings: Any, s: SolverSettings) -> Any:
-    """The deformer the settings ask for: coarse to fine (by size unless the settings say),
-    volumetric or plain."""
+    """The deformer the settings ask for: coarse to fine, volumetric or plain."""
     from arapkit import Deformer
 
-    if not s.volumetric and coarse_to_fine(req.mesh, s.multires, {"energy": s.method}):
-        # the proxy previews at once; the full factor is built meanwhile
+    if _coarse_to_fine(req.mesh, s):
+        # the proxy previews at once; the full factor is built in the background once the
+        # first preview is out (started earlier, it competes with that preview)
         return MultiresDeformer(req.mesh, req.handles, rings, s.weights, energy=s.method,
-                                tol=s.tol, max_iter=s.max_iter, background=True)
+                                tol=s.tol, max_iter=s.max_iter)
     # chosen above: not again by size
     return Deformer(req.mesh, req.handles, rings=rings, energy=s.method, weights=s.weights,
                     tol=s.tol, max_iter=s.max_iter, multires=False,
@@ -152,15 +158,10 @@ class _Engine:
             self.mesh = req.mesh
             return self.deformer
         d = self.deformer
-        changed = False
         if info.rigidity_map and not np.array_equal(d.rings, req.rings):
             d.set_rings(req.rings)
-            changed = True
         if not np.array_equal(d.handles, req.handles):
             d.set_handles(req.handles)
-            changed = True
-        if changed and isinstance(d, MultiresDeformer):
-            d.prepare(background=True)
         return d
 
     def laplacian_editor(self, req: SolveRequest) -> Any:
@@ -231,6 +232,18 @@ class SolveWorker:
             self._pending = req
             self._cond.notify_all()
             return req.seq
+
+    def expect(self, mesh: Any, settings: SolverSettings) -> None:
+        """A mesh is about to be solved: start what takes long and needs only the mesh.
+
+        A large mesh's proxy is decimated in a child process meanwhile (seconds that would
+        otherwise hold this process's GIL while the page is being set up).
+        """
+        try:
+            if _coarse_to_fine(mesh, settings):
+                start_decimation(mesh)
+        except Exception:  # an early start only: the solve itself reports any problem
+            pass
 
     def reset_shape(self, vertices: np.ndarray | None, mesh: Any = None) -> None:
         """Set the warm start for the next solve (e.g. after loading another mesh)."""
@@ -418,6 +431,7 @@ class SolveWorker:
                        proxy_mesh=d.proxy_mesh, proxy_vertices=p.proxy.vertices)
             if first:
                 self._record_latency(req)
+                d.prepare(background=True)
             if self.has_newer:
                 return False
             if done:

@@ -39,6 +39,9 @@ True
 from __future__ import annotations
 
 import hashlib
+import io
+import subprocess
+import sys
 import threading
 import time
 from collections import OrderedDict
@@ -62,7 +65,7 @@ from .deformer import MULTIRES_AUTO_VERTICES, Deformer, register_variant
 from .registry import method
 
 __all__ = ["AUTO_MIN_VERTICES", "DEFAULT_PROXY_VERTICES", "Binding", "MultiresDeformer",
-           "Preview", "decimate", "proxy_rings"]
+           "Preview", "decimate", "proxy_rings", "start_decimation"]
 
 #: proxy size: its iteration (5–8 ms on two cores) leaves room for a 30 Hz frame
 DEFAULT_PROXY_VERTICES = 20_000
@@ -90,11 +93,124 @@ def _content_key(mesh: Mesh, n_target: int) -> str:
     return h.hexdigest()
 
 
+def _decimator_input(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
+    # writable copies: the wrapper refuses read-only arrays
+    return (np.array(mesh.vertices, dtype=np.float32), np.array(mesh.faces, dtype=np.int64))
+
+
+def _simplify(V: np.ndarray, F: np.ndarray, n_target: int) -> tuple[np.ndarray, np.ndarray]:
+    """fast-simplification to about ``n_target`` vertices (2 faces per vertex)."""
+    import fast_simplification
+
+    return fast_simplification.simplify(V, F, target_count=2 * n_target)
+
+
+#: what a child process runs: fast-simplification on arrays read from stdin (no arapkit
+#: import: the child starts in about 0.2 s)
+# numpy's .npy reader and writer need a seekable file: the pipes are read and written whole
+_CHILD = """
+import io, sys
+import numpy as np
+from numpy.lib import format as npf
+import fast_simplification
+src = io.BytesIO(sys.stdin.buffer.read())
+V, F = npf.read_array(src), npf.read_array(src)
+U, G = fast_simplification.simplify(V, F, target_count=int(sys.argv[1]))
+out = io.BytesIO()
+npf.write_array(out, np.asarray(U), allow_pickle=False)
+npf.write_array(out, np.asarray(G), allow_pickle=False)
+sys.stdout.buffer.write(out.getvalue())
+"""
+
+
+def _run_child(V: np.ndarray, F: np.ndarray, n_target: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_simplify` in a child Python (raises where the child fails)."""
+    buf = io.BytesIO()
+    np.lib.format.write_array(buf, V, allow_pickle=False)
+    np.lib.format.write_array(buf, F, allow_pickle=False)
+    done = subprocess.run([sys.executable, "-c", _CHILD, str(2 * n_target)],
+                          input=buf.getvalue(), capture_output=True, check=True, timeout=600)
+    out = io.BytesIO(done.stdout)
+    return np.lib.format.read_array(out), np.lib.format.read_array(out)
+
+
+def _simplify_in_child(V: np.ndarray, F: np.ndarray,
+                       n_target: int) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`_simplify` in a child Python: it holds the GIL for seconds, a child does not.
+
+    Falls back to this process where a child cannot run (an embedded interpreter, a
+    missing executable): same library, same input, same result.
+    """
+    try:
+        return _run_child(V, F, n_target)
+    except (OSError, ValueError, subprocess.SubprocessError):
+        return _simplify(V, F, n_target)
+
+
+def _proxy_arrays(U: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The decimator's output without the vertices it left unreferenced."""
+    used = np.zeros(len(U), dtype=bool)
+    used[G.ravel()] = True
+    new = np.cumsum(used) - 1
+    return np.asarray(U, dtype=np.float64)[used], new[G].astype(np.int64)
+
+
+_pending: dict[str, Future] = {}
+_child_pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="arapkit-decimate")
+
+
+def start_decimation(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> bool:
+    """Start decimating ``mesh`` in a child process; :func:`decimate` then collects it.
+
+    For a caller with other work meanwhile (the editor draws the mesh and loads its kernels
+    while the proxy is made): the decimator holds the GIL for seconds in this process, and a
+    child runs on another core. Returns whether a decimation was started (not when the mesh
+    is its own proxy, or the proxy is cached or already on its way).
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar
+    >>> start_decimation(bar(), 20_000)  # small enough to be its own proxy
+    False
+    """
+    n_target = integer(n_target, "proxy_vertices", lo=100)
+    if mesh.n_vertices <= 2 * n_target:
+        return False
+    key = _content_key(mesh, n_target)
+    with _cache_lock:
+        if key in _cache or key in _pending:
+            return False
+        job = _child_pool.submit(_simplify_in_child, *_decimator_input(mesh), n_target)
+        _pending[key] = job
+    # into the cache when done, whether or not anyone collects it (outside the lock: a job
+    # already done runs the callback here and now)
+    job.add_done_callback(lambda f: _keep(key, f))
+    return True
+
+
+def _keep(key: str, job: Future) -> None:
+    """Move a finished child decimation into the cache (a failed one is just forgotten)."""
+    arrays = None if job.exception() is not None else _proxy_arrays(*job.result())
+    with _cache_lock:
+        _pending.pop(key, None)
+        if arrays is not None:
+            _store(key, arrays)
+
+
+def _store(key: str, arrays: tuple[np.ndarray, np.ndarray]) -> None:
+    """Cache a proxy (``_cache_lock`` held), dropping the least recently used."""
+    _cache[key] = arrays
+    _cache.move_to_end(key)
+    while len(_cache) > _CACHE_SIZE:
+        _cache.popitem(last=False)
+
+
 def decimate(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> Mesh:
     """A proxy of about ``n_target`` vertices by quadric decimation (deterministic, cached).
 
     Unreferenced vertices the decimator leaves are dropped. A mesh already at most twice
-    ``n_target`` is returned as it is: decimating it would save less than it costs.
+    ``n_target`` is returned as it is: decimating it would save less than it costs. A
+    decimation begun by :func:`start_decimation` is waited for.
 
     Examples
     --------
@@ -112,21 +228,16 @@ def decimate(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> Mesh:
         hit = _cache.get(key)
         if hit is not None:
             _cache.move_to_end(key)
+        running = _pending.get(key)
+    if hit is None and running is not None:
+        try:
+            hit = _proxy_arrays(*running.result())
+        except Exception:  # the child's own fallback failed too: once more, here
+            hit = None
     if hit is None:
-        import fast_simplification
-
-        # writable copies: the wrapper refuses read-only arrays; 2 faces per vertex
-        U, G = fast_simplification.simplify(np.array(mesh.vertices, dtype=np.float32),
-                                            np.array(mesh.faces, dtype=np.int64),
-                                            target_count=2 * n_target)
-        used = np.zeros(len(U), dtype=bool)
-        used[G.ravel()] = True
-        new = np.cumsum(used) - 1
-        hit = (np.asarray(U, dtype=np.float64)[used], new[G].astype(np.int64))
+        hit = _proxy_arrays(*_simplify(*_decimator_input(mesh), n_target))
         with _cache_lock:
-            _cache[key] = hit
-            while len(_cache) > _CACHE_SIZE:
-                _cache.popitem(last=False)
+            _store(key, hit)
     return Mesh(hit[0], hit[1], name=f"{mesh.name} proxy")
 
 
@@ -137,6 +248,12 @@ def _skin(Y, R, idx, D, out):  # pragma: no cover - compiled
         for a in range(3):
             out[v, a] = Y[q, a] + R[q, a, 0] * D[v, 0] + R[q, a, 1] * D[v, 1] \
                 + R[q, a, 2] * D[v, 2]
+
+
+def full_tree_of(full: np.ndarray) -> cKDTree:
+    """The full mesh's k-d tree for :meth:`Binding.between` (unbalanced: it serves one
+    query, and builds 2x faster)."""
+    return cKDTree(full, balanced_tree=False)
 
 
 @dataclass(frozen=True)
@@ -158,8 +275,11 @@ class Binding:
     near_full: np.ndarray
 
     @classmethod
-    def between(cls, full: np.ndarray, proxy: np.ndarray) -> Binding:
+    def between(cls, full: np.ndarray, proxy: np.ndarray,
+                full_tree: cKDTree | None = None) -> Binding:
         """Bind ``full`` (n, 3) rest positions to ``proxy`` (m, 3) ones by k-d trees.
+
+        ``full_tree``: :func:`full_tree_of` ``full``, when made beforehand.
 
         Examples
         --------
@@ -169,8 +289,11 @@ class Binding:
         >>> b.idx.tolist(), b.near_full.tolist()
         ([0, 0, 1], [0, 2])
         """
-        idx = cKDTree(proxy).query(full, k=1)[1].astype(np.int64)
-        near = cKDTree(full).query(proxy, k=1)[1].astype(np.int64)
+        # the queries run on every core (scipy releases the GIL)
+        idx = cKDTree(proxy).query(full, k=1, workers=-1)[1].astype(np.int64)
+        if full_tree is None:
+            full_tree = full_tree_of(full)
+        near = full_tree.query(proxy, k=1, workers=-1)[1].astype(np.int64)
         return cls(idx, np.ascontiguousarray(full - proxy[idx]), near)
 
     def skin(self, Y: np.ndarray, R: np.ndarray) -> np.ndarray:
@@ -190,6 +313,27 @@ class Binding:
         return out
 
 
+_kernels_loaded = threading.Event()
+
+
+def _load_kernels() -> None:
+    """Load the compiled local/global kernels once per process, on a 50-vertex problem.
+
+    Loading them from numba's cache takes about 0.4 s of a large mesh's opening: done while
+    :func:`start_decimation`'s child works, it is off the path to the first preview.
+    """
+    if _kernels_loaded.is_set():
+        return
+    from ..mesh.shapes import bar, bar_bend
+
+    m = bar(segments=(4, 2, 2))
+    h, t = bar_bend(m, 30)
+    Deformer(m, h, accelerate=True, free_components="follow", multires=False).solve(
+        t, max_iter=2)
+    Binding.between(m.vertices, m.vertices[:8]).skin(m.vertices[:8], np.tile(np.eye(3), (8, 1, 1)))
+    _kernels_loaded.set()
+
+
 def _can_overlap() -> bool:
     """Whether numba's parallel kernels may run on two threads at once.
 
@@ -200,12 +344,6 @@ def _can_overlap() -> bool:
         return numba.threading_layer() != "workqueue"
     except ValueError:  # no parallel kernel has run yet: unknown, so no
         return False
-
-
-def _mean_edge(mesh: Mesh) -> float:
-    E = mesh.edges
-    return float(np.linalg.norm(mesh.vertices[E[:, 0]] - mesh.vertices[E[:, 1]],
-                                axis=1).mean())
 
 
 def proxy_rings(rings: np.ndarray, near_full: np.ndarray, scale: float) -> np.ndarray:
@@ -227,9 +365,11 @@ def _handle_regions(mesh: Mesh, handles: np.ndarray) -> np.ndarray:
     """The connected region (of the handle vertices' own edges) of each handle."""
     pos = np.full(mesh.n_vertices, -1, dtype=np.int64)
     pos[handles] = np.arange(len(handles))
-    E = mesh.edges
-    both = (pos[E[:, 0]] >= 0) & (pos[E[:, 1]] >= 0)
-    a, b = pos[E[both, 0]], pos[E[both, 1]]
+    # the faces' edges (no edge list built), kept where both ends are handles
+    P = pos[mesh.faces]
+    inside = P >= 0
+    pairs = [P[inside[:, i] & inside[:, j]][:, [i, j]] for i, j in ((0, 1), (1, 2), (2, 0))]
+    a, b = np.concatenate(pairs).T
     n = len(handles)
     graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
     return connected_components(graph, directed=False)[1]
@@ -325,10 +465,14 @@ class MultiresDeformer:
         self._options = options
         self.accelerate = bool(options["accelerate"])
         self.tol = self._options.get("tol", 1e-3)
+        # what needs no proxy first: a child process may still be decimating
+        _load_kernels()
+        full = np.asarray(mesh.vertices, dtype=np.float64)
+        tree = full_tree_of(full)
+        _ = mesh.mean_edge_length
         self.proxy_mesh = decimate(mesh, proxy_vertices)
-        self.binding = Binding.between(np.asarray(mesh.vertices, dtype=np.float64),
-                                       self.proxy_mesh.vertices)
-        self.edge_ratio = _mean_edge(mesh) / max(_mean_edge(self.proxy_mesh), 1e-300)
+        self.binding = Binding.between(full, self.proxy_mesh.vertices, tree)
+        self.edge_ratio = mesh.mean_edge_length / max(self.proxy_mesh.mean_edge_length, 1e-300)
         self._map_handles()
         # the proxy poses the full problem's method and weights; its parts without a
         # handle follow, whatever the full mesh does with its own
@@ -338,9 +482,6 @@ class MultiresDeformer:
                               **{k: v for k, v in options.items()
                                  if k in ("sr_alpha", "history")})
         self.proxy.prepare()
-        # compiles (or loads) the skinning kernel now rather than at the first preview
-        self.binding.skin(self.proxy_mesh.vertices,
-                          np.broadcast_to(np.eye(3), (self.proxy_mesh.n_vertices, 3, 3)))
         self._open_s = time.perf_counter() - t0
         self._proxy_shape: np.ndarray | None = None
         self._full: Deformer | None = None
@@ -350,6 +491,7 @@ class MultiresDeformer:
         self._built = -1
         self._pool = ThreadPoolExecutor(max_workers=1, thread_name_prefix="arapkit-full")
         self._pending: Future | None = None
+        self._pending_version = -1
         if background:
             self.prepare(background=True)
 
@@ -395,6 +537,7 @@ class MultiresDeformer:
             return True
         # a finished build may be for handles or r changed since: then build again
         if self._pending is None or self._pending.done():
+            self._pending_version = self._version
             self._pending = self._pool.submit(self._build_full)
         try:
             self._pending.result(timeout)
@@ -405,7 +548,11 @@ class MultiresDeformer:
     def prepare(self, background: bool = False) -> None:
         """Build the full-resolution factor now (or on a background thread, where safe)."""
         if background:
-            if _can_overlap():
+            # once per version of the handles and r: a caller may ask on every request
+            if _can_overlap() and self._stale() and not (
+                    self._pending is not None and not self._pending.done()
+                    and self._pending_version == self._version):
+                self._pending_version = self._version
                 self._pending = self._pool.submit(self._build_full)
         else:
             _ = self.full
