@@ -404,3 +404,30 @@ def test_mean_edge_length_is_the_mean_over_unique_edges_on_a_closed_mesh():
     brute = np.mean([np.linalg.norm(mesh.vertices[i] - mesh.vertices[j]) for i, j in E])
     assert mesh.n_components == 1 and mesh.boundary_loops == []
     assert mesh.mean_edge_length == pytest.approx(brute, rel=1e-12)
+
+
+def test_checked_targets_are_checked_once_and_cannot_change(big, monkeypatch):
+    """A drag's frames pass the read-only array back: no check and no fit again; any other
+    array (a caller's own, changed in place) is checked and fitted afresh."""
+    import arapkit.methods.multires as mr
+
+    mesh, h, t = big
+    d = MultiresDeformer(mesh, h)
+    calls: list = []
+    real = mr.check_targets
+    monkeypatch.setattr(mr, "check_targets", lambda *a, **k: calls.append(1) or real(*a, **k))
+    T = d.checked_targets(t)
+    with pytest.raises(ValueError):
+        T[0, 0] = 1.0  # read-only
+    p1 = d.preview(T, max_iter=2, full=False)
+    d.to_full(p1.proxy, T)
+    assert len(calls) == 1
+    mine = t.copy()
+    d.preview(mine, max_iter=1, full=False)
+    mine[:] += 0.5  # changed in place: seen, since only our read-only array is trusted
+    q = d.proxy_targets(mine)
+    assert len(calls) == 3
+    assert np.allclose(q, d.proxy_targets(np.array(t) + 0.5))
+    mine[0, 0] = np.nan
+    with pytest.raises(InputError, match="handle 0"):
+        d.preview(mine, max_iter=1)

@@ -411,8 +411,10 @@ def target_positions(handles: np.ndarray, targets: Any, name: str = "targets") -
     T = real_array(targets, name)
     if T.shape != (len(handles), 3):
         raise InputError(f"{name}: expected shape ({len(handles)}, 3), got {T.shape}")
-    bad = np.flatnonzero(~np.isfinite(T).all(axis=1))
-    if len(bad):
+    # one flat test first: the row-wise one costs 20 ms for a scan's 4 x 10^5 handle
+    # vertices, on every preview frame of a drag
+    if not np.isfinite(T).all():
+        bad = np.flatnonzero(~np.isfinite(T).all(axis=1))
         raise InputError(f"{name}: handle {bad[0]} (vertex {handles[bad[0]]}) target is not finite")
     return T
 

@@ -408,6 +408,7 @@ class SolveWorker:
     def _preview(self, req: SolveRequest, d: MultiresDeformer, setup: float) -> bool:
         """Iterate the proxy a frame at a time, sending each shape; False if superseded."""
         count = 0
+        T = d.checked_targets(req.targets)  # once, not on every frame
         while True:
             chunk_end = time.perf_counter() + PREVIEW_FRAME_MS / 1e3
             first = count == 0
@@ -418,12 +419,12 @@ class SolveWorker:
                 return (self.has_newer and not first) or time.perf_counter() >= chunk_end
 
             # the display draws the proxy: the full mesh is mapped only once it settles
-            p = d.preview(req.targets, callback=frame, full=False)
+            p = d.preview(T, callback=frame, full=False)
             count += p.proxy.iterations
             done = bool(p.proxy.converged)
             # sent even when a newer move cut the chunk short: the proxy's shape costs
             # 0.24 MB and a millisecond, and a drag stays smooth between moves
-            V = d.to_full(p.proxy, req.targets) if done and not self.has_newer else None
+            V = d.to_full(p.proxy, T) if done and not self.has_newer else None
             if V is not None:
                 self._keep(req, V)
             self._emit(req, V, p.proxy.energy, count, done, done and req.live,

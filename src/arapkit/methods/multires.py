@@ -484,6 +484,7 @@ class MultiresDeformer:
         self.proxy.prepare()
         self._open_s = time.perf_counter() - t0
         self._proxy_shape: np.ndarray | None = None
+        self._checked: np.ndarray | None = None
         self._full: Deformer | None = None
         # the handles and r change a version; the full problem records the one it was built
         # for (comparing 10^6-entry arrays on every access cost milliseconds)
@@ -592,12 +593,38 @@ class MultiresDeformer:
         >>> bool(np.allclose(d.proxy_targets(t), Q[d.proxy.handles]))
         True
         """
-        return self._proxy_targets(check_targets(self.handles, targets))
+        return self._proxy_targets(self.checked_targets(targets))
+
+    def checked_targets(self, targets) -> np.ndarray:
+        """``targets`` validated once, as a read-only array the methods here accept unchecked.
+
+        A drag previews the same targets chunk after chunk; checking a scan's 4 x 10^5
+        handle targets costs about 10 ms each time. Being read-only, the returned array
+        cannot change between calls, so passing it back skips the check and the fit.
+
+        Examples
+        --------
+        >>> from arapkit.mesh.shapes import bar, bar_bend
+        >>> mesh = bar(segments=(60, 8, 8))
+        >>> h, t = bar_bend(mesh, 30)
+        >>> d = MultiresDeformer(mesh, h, proxy_vertices=300)
+        >>> T = d.checked_targets(t)
+        >>> T.flags.writeable, d.checked_targets(T) is T
+        (False, True)
+        """
+        last = self._checked
+        if last is not None and targets is last:
+            return last
+        T = check_targets(self.handles, targets)
+        T.flags.writeable = False
+        self._checked = T
+        return T
 
     def _proxy_targets(self, T: np.ndarray) -> np.ndarray:
         # a drag sends the same targets chunk after chunk: fit them once
         last = self._last_targets
-        if last is not None and last[0].shape == T.shape and np.array_equal(last[0], T):
+        if last is not None and (last[0] is T or (last[0].shape == T.shape
+                                                   and np.array_equal(last[0], T))):
             return last[1]
         fit = self._fit
         R, t = rigid_motions(self._rest_handles[fit], T[fit], self._region[fit],
@@ -605,7 +632,7 @@ class MultiresDeformer:
         g = self._proxy_region
         Q = self.proxy_mesh.vertices[self._proxy_handles]
         out = np.einsum("vij,vj->vi", R[g], Q) + t[g]
-        self._last_targets = (T.copy(), out)
+        self._last_targets = (T if not T.flags.writeable else T.copy(), out)
         return out
 
     # -- configuration ------------------------------------------------------------------
@@ -613,6 +640,7 @@ class MultiresDeformer:
         """Use a new handle set: the proxy is refactorised now, the full mesh lazily."""
         self.handles = check_handles(self.mesh, handles)
         self._version += 1
+        self._checked = None
         self._map_handles()
         self.proxy.set_handles(self._proxy_handles)
         self.proxy.prepare()
@@ -678,7 +706,7 @@ class MultiresDeformer:
             Map the proxy to the full mesh (else ``Preview.vertices`` is None: a display
             that draws the proxy saves 3–80 ms a frame; :meth:`to_full` maps it later).
         """
-        T = check_targets(self.handles, targets)
+        T = self.checked_targets(targets)
         start = None if restart or self._proxy_shape is None else self._proxy_shape
         res = self.proxy.solve(self._proxy_targets(T), init=start, tol=tol,
                                max_iter=max_iter or PROXY_MAX_ITER, callback=callback)
@@ -688,12 +716,12 @@ class MultiresDeformer:
     def to_full(self, proxy: Result, targets) -> np.ndarray:
         """The full mesh's shape from a proxy result: skinned, handles at ``targets``."""
         X = self.binding.skin(proxy.vertices, proxy.rotations)
-        X[self.handles] = check_targets(self.handles, targets)
+        X[self.handles] = self.checked_targets(targets)
         return X
 
     def coarse_start(self, targets) -> tuple[np.ndarray, Result]:
         """The full solve's start: the proxy solved from rest to :data:`PROXY_TOL`, skinned."""
-        T = check_targets(self.handles, targets)
+        T = self.checked_targets(targets)
         res = self.proxy.solve(self._proxy_targets(T), init="identity", tol=PROXY_TOL,
                                max_iter=PROXY_MAX_ITER)
         return self.to_full(res, T), res
