@@ -143,7 +143,8 @@ def _simplify_in_child(V: np.ndarray, F: np.ndarray,
     """
     try:
         return _run_child(V, F, n_target)
-    except (OSError, ValueError, subprocess.SubprocessError):
+    except (OSError, TypeError, ValueError, subprocess.SubprocessError):
+        # TypeError: no sys.executable (an embedded interpreter)
         return _simplify(V, F, n_target)
 
 
@@ -153,6 +154,13 @@ def _proxy_arrays(U: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     used[G.ravel()] = True
     new = np.cumsum(used) - 1
     return np.asarray(U, dtype=np.float64)[used], new[G].astype(np.int64)
+
+
+def _proxy_key(mesh: Mesh, n_target: int) -> str | None:
+    """The cache key of ``mesh``'s proxy; None where the mesh is its own proxy (at most
+    twice ``n_target``: decimating it would save less than it costs)."""
+    n_target = integer(n_target, "proxy_vertices", lo=100)
+    return None if mesh.n_vertices <= 2 * n_target else _content_key(mesh, n_target)
 
 
 _pending: dict[str, Future] = {}
@@ -173,10 +181,10 @@ def start_decimation(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> bool
     >>> start_decimation(bar(), 20_000)  # small enough to be its own proxy
     False
     """
-    n_target = integer(n_target, "proxy_vertices", lo=100)
-    if mesh.n_vertices <= 2 * n_target:
+    key = _proxy_key(mesh, n_target)
+    if key is None:
         return False
-    key = _content_key(mesh, n_target)
+    n_target = int(n_target)
     with _cache_lock:
         if key in _cache or key in _pending:
             return False
@@ -220,10 +228,10 @@ def decimate(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> Mesh:
     >>> 200 < p.n_vertices < 400 and p.name.endswith("proxy")
     True
     """
-    n_target = integer(n_target, "proxy_vertices", lo=100)
-    if mesh.n_vertices <= 2 * n_target:
+    key = _proxy_key(mesh, n_target)
+    if key is None:
         return mesh
-    key = _content_key(mesh, n_target)
+    n_target = int(n_target)
     with _cache_lock:
         hit = _cache.get(key)
         if hit is not None:
