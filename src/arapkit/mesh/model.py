@@ -374,14 +374,22 @@ class Mesh(EdgeTopology):
         return len(self.faces)
 
     @cached_property
-    def _half_edges(self) -> np.ndarray:
+    def half_edges(self) -> np.ndarray:
+        """(3m, 2) vertex pairs of the faces' edges: every face's (0, 1), then (1, 2), then
+        (2, 0). An edge shared by two faces appears twice (no sorting, unlike :attr:`edges`).
+
+        Examples
+        --------
+        >>> Mesh(np.eye(3), [[0, 1, 2]]).half_edges.tolist()
+        [[0, 1], [1, 2], [2, 0]]
+        """
         F = self.faces
         return np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
 
     @cached_property
     def _edge_keys(self) -> tuple[np.ndarray, np.ndarray]:
         """Sorted unique keys ``i * n + j`` (i < j) and the edge id of every half edge."""
-        he = self._half_edges
+        he = self.half_edges
         n = np.int64(self.n_vertices)
         keys = np.minimum(he[:, 0], he[:, 1]) * n + np.maximum(he[:, 0], he[:, 1])
         ukeys, inverse = np.unique(keys, return_inverse=True)
@@ -433,8 +441,8 @@ class Mesh(EdgeTopology):
     def mean_edge_length(self) -> float:
         """Mean length of the faces' edges: the mesh's resolution (0 without faces).
 
-        An edge shared by two faces counts twice, so no edge list is built (on a closed
-        manifold mesh this is the mean over unique edges).
+        Over :attr:`half_edges`: an edge shared by two faces counts twice, and no sorted
+        edge list is built (on a closed manifold mesh this is the mean over unique edges).
 
         Examples
         --------
@@ -443,15 +451,11 @@ class Mesh(EdgeTopology):
         ...       .mean_edge_length, 6)
         1.138071
         """
-        F = self.faces
-        if len(F) == 0:
+        he = self.half_edges
+        if len(he) == 0:
             return 0.0
-        V = self.vertices
-        total = 0.0
-        for a, b in ((0, 1), (1, 2), (2, 0)):
-            d = V[F[:, b]] - V[F[:, a]]
-            total += float(np.sqrt(np.einsum("ij,ij->i", d, d)).sum())
-        return total / (3 * len(F))
+        d = self.vertices[he[:, 1]] - self.vertices[he[:, 0]]
+        return float(np.sqrt(np.einsum("ij,ij->i", d, d)).mean())
 
     @cached_property
     def bounding_box_diagonal(self) -> float:

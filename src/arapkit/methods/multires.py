@@ -238,10 +238,8 @@ def decimate(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> Mesh:
             _cache.move_to_end(key)
         running = _pending.get(key)
     if hit is None and running is not None:
-        try:
-            hit = _proxy_arrays(*running.result())
-        except Exception:  # the child's own fallback failed too: once more, here
-            hit = None
+        # the child falls back to this process itself: an error here is the decimator's own
+        hit = _proxy_arrays(*running.result())
     if hit is None:
         hit = _proxy_arrays(*_simplify(*_decimator_input(mesh), n_target))
         with _cache_lock:
@@ -373,11 +371,9 @@ def _handle_regions(mesh: Mesh, handles: np.ndarray) -> np.ndarray:
     """The connected region (of the handle vertices' own edges) of each handle."""
     pos = np.full(mesh.n_vertices, -1, dtype=np.int64)
     pos[handles] = np.arange(len(handles))
-    # the faces' edges (no edge list built), kept where both ends are handles
-    P = pos[mesh.faces]
-    inside = P >= 0
-    pairs = [P[inside[:, i] & inside[:, j]][:, [i, j]] for i, j in ((0, 1), (1, 2), (2, 0))]
-    a, b = np.concatenate(pairs).T
+    # the faces' edges (no sorted edge list built), kept where both ends are handles
+    P = pos[mesh.half_edges]
+    a, b = P[(P[:, 0] >= 0) & (P[:, 1] >= 0)].T
     n = len(handles)
     graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
     return connected_components(graph, directed=False)[1]
