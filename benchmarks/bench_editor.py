@@ -185,8 +185,10 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str) -> dict[str, floa
             client = FrameCounter(app.server.get_port())
             time.sleep(0.5)
             sends: list[tuple[int, float]] = []
-            updates: list = []
             errors: list[str] = []
+            # only the last preview is kept: holding every update (a full shape each, 42 MB
+            # at 1.75M vertices) would count the bench's own memory as the editor's
+            last_preview: list = []
             sent = threading.Event()
 
             def hook(u, t: float) -> None:
@@ -194,7 +196,8 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str) -> dict[str, floa
                     errors.append(u.error)
                 else:
                     sends.append((u.seq, t))
-                    updates.append((u, t))
+                    if u.proxy_vertices is not None and u.vertices is not None:
+                        last_preview[:] = [u]
                 sent.set()
 
             app.sent_hooks.append(hook)
@@ -235,16 +238,14 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str) -> dict[str, floa
                 "open_s": t_first, "exact_s": t_exact, "release_s": t_done - t_release,
             }
             t0, t1 = moves[0][1], t_release
-            during = [u for u, t in updates if t0 <= t <= t1]
+            during = [t for _, t in sends if t0 <= t <= t1]
             out["rate"] = len(during) / (t1 - t0)
             shapes = [(t, n) for t, n, shape in client.frames if shape and t0 <= t <= t1]
             out["client_rate"] = len(shapes) / (t1 - t0)
             out["client_mb_s"] = sum(n for _, n in shapes) / (t1 - t0) / 1e6
-            previews = [u for u, _ in updates
-                        if u.proxy_vertices is not None and u.vertices is not None]
-            if previews and final is not None and final.proxy_vertices is None:
+            if last_preview and final is not None and final.proxy_vertices is None:
                 diag = float(np.linalg.norm(st.vertices.max(0) - st.vertices.min(0)))
-                e = np.linalg.norm(previews[-1].vertices - final.vertices, axis=1) / diag
+                e = np.linalg.norm(last_preview[0].vertices - final.vertices, axis=1) / diag
                 out["prev_max"], out["prev_p95"] = float(e.max()), float(np.percentile(e, 95))
             # a new handle (a vertex at the middle height, held where it is)
             y = st.vertices[:, 1]

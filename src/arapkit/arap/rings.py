@@ -24,7 +24,7 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from ..mesh.model import Mesh
+from ..mesh.model import Mesh, vertex_adjacency
 from ..validate import MAX_RINGS, ring_sizes
 
 __all__ = [
@@ -40,26 +40,6 @@ __all__ = [
 
 #: r per vertex, checked: the one rule of :func:`arapkit.validate.ring_sizes` (int32)
 check_rings = ring_sizes
-
-
-def vertex_adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """CSR adjacency ``(ptr, neighbour, edge id)`` of an undirected edge list.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> ptr, nbr, eid = vertex_adjacency(3, np.array([[0, 1], [1, 2]]))
-    >>> ptr.tolist(), nbr.tolist(), eid.tolist()
-    ([0, 1, 3, 4], [1, 0, 2, 1], [0, 0, 1, 1])
-    """
-    m = len(edges)
-    src = np.concatenate([edges[:, 0], edges[:, 1]])
-    dst = np.concatenate([edges[:, 1], edges[:, 0]])
-    eid = np.concatenate([np.arange(m), np.arange(m)])
-    order = np.lexsort((dst, src))
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(src, minlength=n), out=ptr[1:])
-    return ptr, dst[order].astype(np.int32), eid[order].astype(np.int32)
 
 
 @nb.njit(cache=True, nogil=True)

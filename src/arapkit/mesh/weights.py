@@ -30,6 +30,9 @@ Weight kinds
 
 from __future__ import annotations
 
+import math
+
+import numba as nb
 import numpy as np
 
 from ..errors import InputError
@@ -66,21 +69,41 @@ def corner_cotangents(V: np.ndarray, F: np.ndarray) -> np.ndarray:
     >>> np.round(corner_cotangents(V, np.array([[0, 1, 2]])), 12).tolist()
     [[0.0, 1.0, 1.0]]
     """
-    cots = np.empty(F.shape, dtype=np.float64)
-    for c in range(3):
-        a = V[F[:, (c + 1) % 3]] - V[F[:, c]]
-        b = V[F[:, (c + 2) % 3]] - V[F[:, c]]
-        # cot is scale-free: divide both sides by a power of two near their size (exact)
-        # so that dot and cross neither overflow (coordinates ~1e200) nor underflow (~1e-160)
-        _, e = np.frexp(np.maximum(np.abs(a).max(axis=1), np.abs(b).max(axis=1)))
-        a, b = np.ldexp(a, -e[:, None]), np.ldexp(b, -e[:, None])
-        dot = np.einsum("ij,ij->i", a, b)
-        cross = np.linalg.norm(np.cross(a, b), axis=1)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            cot = dot / cross
-        cot[~np.isfinite(cot)] = np.sign(dot[~np.isfinite(cot)]) * COT_CAP
-        cots[:, c] = np.clip(cot, -COT_CAP, COT_CAP)
+    cots = np.empty(np.shape(F), dtype=np.float64)
+    _corner_cotangents(np.ascontiguousarray(V, dtype=np.float64),
+                       np.ascontiguousarray(F, dtype=np.int64), cots)
     return cots
+
+
+_NO_RESCALE_BELOW, _NO_RESCALE_ABOVE = 2.0**-100, 2.0**100
+
+
+@nb.njit(parallel=True, cache=True, nogil=True)
+def _corner_cotangents(V, F, out):  # pragma: no cover - compiled
+    # One pass over the faces (the NumPy version made ~40 temporaries of the face count:
+    # 0.7 s of a 437K-vertex precomputation).
+    for f in nb.prange(F.shape[0]):
+        for c in range(3):
+            o, i, j = F[f, c], F[f, (c + 1) % 3], F[f, (c + 2) % 3]
+            a0, a1, a2 = V[i, 0] - V[o, 0], V[i, 1] - V[o, 1], V[i, 2] - V[o, 2]
+            b0, b1, b2 = V[j, 0] - V[o, 0], V[j, 1] - V[o, 1], V[j, 2] - V[o, 2]
+            # cot is scale-free: far from 1, divide both sides by a power of two near
+            # their size (exact) so that dot and cross neither overflow (coordinates
+            # ~1e200) nor underflow (~1e-160); in between the scaling changes no bit
+            big = max(abs(a0), abs(a1), abs(a2), abs(b0), abs(b1), abs(b2))
+            if not _NO_RESCALE_BELOW < big < _NO_RESCALE_ABOVE and math.isfinite(big):
+                e = math.frexp(big)[1]
+                a0, a1, a2 = math.ldexp(a0, -e), math.ldexp(a1, -e), math.ldexp(a2, -e)
+                b0, b1, b2 = math.ldexp(b0, -e), math.ldexp(b1, -e), math.ldexp(b2, -e)
+            dot = a0 * b0 + a1 * b1 + a2 * b2
+            x, y, z = a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0
+            cot = dot / math.sqrt(x * x + y * y + z * z)
+            if math.isnan(dot):
+                out[f, c] = dot
+            elif not math.isfinite(cot):  # a degenerate corner: 0/0 or dot/0
+                out[f, c] = 0.0 if dot == 0.0 else math.copysign(COT_CAP, dot)
+            else:
+                out[f, c] = min(max(cot, -COT_CAP), COT_CAP)
 
 
 def cotangent_weights(mesh: Mesh, clamp_corners: bool = False) -> np.ndarray:
