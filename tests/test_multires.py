@@ -191,6 +191,51 @@ def test_editor_release_is_the_exact_solve(big):
     assert np.abs(final.vertices - want.vertices).max() < 1e-9 * _diag(mesh)
 
 
+def test_a_release_with_the_factor_ready_previews_the_exact_solves_own_start(big):
+    """Once the full factor is built, a release shows the proxy solved from rest (the start
+    of the exact solve) instead of iterating the drag's shape to convergence first; the
+    result is still Deformer's."""
+    from arapkit.editor.settings import SolverSettings
+    from arapkit.editor.worker import SolveRequest, SolveWorker
+
+    mesh, h, t = big
+    updates = []
+    w = SolveWorker(updates.append)
+    w.start()
+    try:
+        s = SolverSettings(multires=True)
+        rings = np.ones(mesh.n_vertices, int)
+        V = mesh.vertices
+        w.submit(SolveRequest(mesh, h, V[h] + (t - V[h]) / 3, rings, s))
+        assert w.wait_idle(300)  # an exact solve: the full factor is built now
+        w.submit(SolveRequest(mesh, h, V[h] + (t - V[h]) * 2 / 3, rings, s, live=True))
+        assert w.wait_idle(120)
+        seq = w.submit(SolveRequest(mesh, h, t, rings, s))
+        assert w.wait_idle(300)
+    finally:
+        w.stop()
+    mine = [u for u in updates if u.seq == seq]
+    assert [u.final for u in mine] == [False] * (len(mine) - 1) + [True]
+    first, final = mine[0], mine[-1]
+    fresh = MultiresDeformer(mesh, h, tol=s.tol, max_iter=s.max_iter)
+    start, pres = fresh.coarse_start(t)
+    assert first.converged and first.iterations == pres.iterations
+    np.testing.assert_array_equal(first.proxy_vertices, pres.vertices)
+    np.testing.assert_array_equal(first.vertices, start)
+    want = fresh.solve(t)
+    assert final.proxy_vertices is None
+    assert np.abs(final.vertices - want.vertices).max() < 1e-9 * _diag(mesh)
+
+
+def test_a_coarse_start_stopped_by_its_callback_stops_the_proxy():
+    mesh = bar(segments=(60, 8, 8))
+    h, t = bar_bend(mesh, 60)
+    d = MultiresDeformer(mesh, h, proxy_vertices=300)
+    _, whole = d.coarse_start(t)
+    _, cut = d.coarse_start(t, callback=lambda it, *_: it >= 2)
+    assert whole.iterations > 2 and cut.iterations == 2 and not cut.converged
+
+
 def test_dragon_converges_within_60_plain_iterations_from_the_proxy():
     """The 437K scan: default solve (coarse to fine) against the plain accelerated one."""
     from arapkit import load_mesh

@@ -723,11 +723,17 @@ class MultiresDeformer:
         X[self.handles] = self.checked_targets(targets)
         return X
 
-    def coarse_start(self, targets) -> tuple[np.ndarray, Result]:
-        """The full solve's start: the proxy solved from rest to :data:`PROXY_TOL`, skinned."""
+    def coarse_start(self, targets, callback=None) -> tuple[np.ndarray, Result]:
+        """The full solve's start: the proxy solved from rest to :data:`PROXY_TOL`, skinned.
+
+        ``solve(targets)`` is ``full.solve(targets, init=coarse_start(targets)[0])``: a
+        caller may show this shape (the editor does, as the settled preview) and then pass
+        it as ``init`` for the same result. ``callback`` is the proxy solve's (as for
+        :meth:`preview`); a start it stopped early is not the solve's.
+        """
         T = self.checked_targets(targets)
         res = self.proxy.solve(self._proxy_targets(T), init="identity", tol=PROXY_TOL,
-                               max_iter=PROXY_MAX_ITER)
+                               max_iter=PROXY_MAX_ITER, callback=callback)
         return self.to_full(res, T), res
 
     def solve(self, targets, init=None, tol: float | None = None,
