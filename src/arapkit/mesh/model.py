@@ -248,9 +248,13 @@ class EdgeTopology:
     1
     """
 
-    @cached_property
+    @property
     def adjacency(self) -> sp.csr_matrix:
-        """Symmetric vertex adjacency matrix (CSR, ones on edges)."""
+        """Symmetric vertex adjacency matrix (CSR, ones on edges).
+
+        Built on each access, not kept: its uses (the components, a bandwidth order) are
+        one-off, and it is 121 MB at 1.75M vertices.
+        """
         E = self.edges
         n = self.n_vertices
         A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
@@ -465,10 +469,12 @@ class Mesh(EdgeTopology):
         """Number of triangles (after repairs)."""
         return len(self.faces)
 
-    @cached_property
+    @property
     def half_edges(self) -> np.ndarray:
         """(3m, 2) vertex pairs of the faces' edges: every face's (0, 1), then (1, 2), then
         (2, 0). An edge shared by two faces appears twice (no sorting, unlike :attr:`edges`).
+
+        Built on each access, not kept (160 MB at 1.75M vertices; a copy of the faces).
 
         Examples
         --------
