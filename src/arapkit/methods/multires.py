@@ -371,9 +371,12 @@ def _handle_regions(mesh: Mesh, handles: np.ndarray) -> np.ndarray:
     """The connected region (of the handle vertices' own edges) of each handle."""
     pos = np.full(mesh.n_vertices, -1, dtype=np.int64)
     pos[handles] = np.arange(len(handles))
-    # the faces' edges (no sorted edge list built), kept where both ends are handles
-    P = pos[mesh.half_edges]
-    a, b = P[(P[:, 0] >= 0) & (P[:, 1] >= 0)].T
+    # the edges of the faces with two or more handle corners (no sorted edge list built,
+    # nothing the size of all the faces' edges), kept where both ends are handles
+    P = pos[mesh.faces]
+    P = P[(P >= 0).sum(axis=1) >= 2]
+    pairs = np.concatenate([P[:, [0, 1]], P[:, [1, 2]], P[:, [2, 0]]])
+    a, b = pairs[(pairs[:, 0] >= 0) & (pairs[:, 1] >= 0)].T
     n = len(handles)
     graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))
     return connected_components(graph, directed=False)[1]
