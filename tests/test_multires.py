@@ -160,32 +160,37 @@ def test_small_meshes_are_their_own_proxy():
     assert decimate(m) is m
 
 
-def test_editor_release_is_the_exact_solve(big):
-    """While dragging the worker sends proxy previews; the release sends Deformer's result."""
+def _run_worker(mesh, h, poses):
+    """Submit ``(targets, live)`` requests one at a time to a coarse-to-fine SolveWorker;
+    return every update, each request's seq and the settings used."""
     from arapkit.editor.settings import SolverSettings
     from arapkit.editor.worker import SolveRequest, SolveWorker
 
-    mesh, h, t = big
-    updates = []
+    updates, seqs = [], []
+    s = SolverSettings(multires=True)
+    rings = np.ones(mesh.n_vertices, int)
     w = SolveWorker(updates.append)
     w.start()
     try:
-        s = SolverSettings(multires=True)
-        rings = np.ones(mesh.n_vertices, int)
-        V = mesh.vertices
-        for k in range(1, 4):  # a drag: three live poses on the way to t
-            T = V[h] + (t - V[h]) * (k / 3)
-            w.submit(SolveRequest(mesh, h, T, rings, s, live=True))
-            assert w.wait_idle(120)
-        live = [u for u in updates if u.error is None]
-        assert live and all(u.proxy_vertices is not None for u in live)
-        assert live[0].proxy_mesh.n_vertices < mesh.n_vertices
-        seq = w.submit(SolveRequest(mesh, h, t, rings, s))
-        assert w.wait_idle(300)
+        for T, live in poses:
+            seqs.append(w.submit(SolveRequest(mesh, h, T, rings, s, live=live)))
+            assert w.wait_idle(300)
     finally:
         w.stop()
+    return updates, seqs, s
+
+
+def test_editor_release_is_the_exact_solve(big):
+    """While dragging the worker sends proxy previews; the release sends Deformer's result."""
+    mesh, h, t = big
+    V = mesh.vertices
+    drag = [(V[h] + (t - V[h]) * (k / 3), True) for k in range(1, 4)]  # three live poses
+    updates, seqs, s = _run_worker(mesh, h, drag + [(t, False)])
+    live = [u for u in updates if u.seq in seqs[:3] and u.error is None]
+    assert live and all(u.proxy_vertices is not None for u in live)
+    assert live[0].proxy_mesh.n_vertices < mesh.n_vertices
     final = updates[-1]
-    assert final.seq == seq and final.final and final.error is None
+    assert final.seq == seqs[-1] and final.final and final.error is None
     assert final.proxy_vertices is None
     want = Deformer(mesh, h, multires=True, tol=s.tol, max_iter=s.max_iter).solve(t)
     assert np.abs(final.vertices - want.vertices).max() < 1e-9 * _diag(mesh)
@@ -195,26 +200,14 @@ def test_a_release_with_the_factor_ready_previews_the_exact_solves_own_start(big
     """Once the full factor is built, a release shows the proxy solved from rest (the start
     of the exact solve) instead of iterating the drag's shape to convergence first; the
     result is still Deformer's."""
-    from arapkit.editor.settings import SolverSettings
-    from arapkit.editor.worker import SolveRequest, SolveWorker
-
     mesh, h, t = big
-    updates = []
-    w = SolveWorker(updates.append)
-    w.start()
-    try:
-        s = SolverSettings(multires=True)
-        rings = np.ones(mesh.n_vertices, int)
-        V = mesh.vertices
-        w.submit(SolveRequest(mesh, h, V[h] + (t - V[h]) / 3, rings, s))
-        assert w.wait_idle(300)  # an exact solve: the full factor is built now
-        w.submit(SolveRequest(mesh, h, V[h] + (t - V[h]) * 2 / 3, rings, s, live=True))
-        assert w.wait_idle(120)
-        seq = w.submit(SolveRequest(mesh, h, t, rings, s))
-        assert w.wait_idle(300)
-    finally:
-        w.stop()
-    mine = [u for u in updates if u.seq == seq]
+    V = mesh.vertices
+    updates, seqs, s = _run_worker(mesh, h, [
+        (V[h] + (t - V[h]) / 3, False),  # an exact solve: the full factor is built after it
+        (V[h] + (t - V[h]) * 2 / 3, True),
+        (t, False),
+    ])
+    mine = [u for u in updates if u.seq == seqs[-1]]
     assert [u.final for u in mine] == [False] * (len(mine) - 1) + [True]
     first, final = mine[0], mine[-1]
     fresh = MultiresDeformer(mesh, h, tol=s.tol, max_iter=s.max_iter)
