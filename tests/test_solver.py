@@ -227,6 +227,24 @@ def test_callback_stops():
     assert seen == res.history
 
 
+@pytest.mark.parametrize("device", ["cpu", "torch-cpu"])
+def test_callback_sees_each_iterations_positions_in_the_callers_units(device):
+    # a mesh far from unit size (the solver works in units of a power of two) and in the
+    # caller's vertex order: the last positions seen are the result's, bitwise, and every
+    # call gets its own array
+    if device == "torch-cpu":
+        pytest.importorskip("torch", reason="the torch extra is not installed")
+    m0 = bar()
+    m = Mesh(m0.vertices * 37.0 + 5.0, m0.faces)
+    h, t = bar_bend(m, 90)
+    seen = []
+    res = Deformer(m, h, device=device).solve(
+        t, max_iter=4, tol=0, callback=lambda i, e, P: seen.append(P) and False)
+    assert len(seen) == 4 and len({id(P) for P in seen}) == 4
+    assert not np.array_equal(seen[0], seen[-1])
+    np.testing.assert_array_equal(seen[-1], res.vertices)
+
+
 def test_component_without_handle():
     a = bar(length=2.0, segments=(10, 2, 2))
     V = np.vstack([a.vertices, a.vertices + [0, 5, 0]])

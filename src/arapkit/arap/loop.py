@@ -255,7 +255,7 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         if abs(E) <= floor or (E_prev is not None and abs(E_prev - E) < tol * abs(E_prev)):
             converged = True
         E_prev = E
-        if callback is not None and callback(it, E * s2, P[inv] * s):
+        if callback is not None and callback(it, E * s2, backend.gather(P, inv, s)):
             break
         if converged:
             break

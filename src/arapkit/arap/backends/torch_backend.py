@@ -518,6 +518,11 @@ class TorchBackend:
         """``P[idx[i]] = X[i]``."""
         P[idx] = X
 
+    @staticmethod
+    def gather(P: np.ndarray, idx: np.ndarray, scale: float) -> np.ndarray:
+        """``P[idx] * scale``, a new array."""
+        return P[idx] * scale
+
     @torch.no_grad()
     def vertex_energy(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
         """Each vertex's term of the energy (internal numbering)."""
