@@ -156,11 +156,13 @@ def _proxy_arrays(U: np.ndarray, G: np.ndarray) -> tuple[np.ndarray, np.ndarray]
     return np.asarray(U, dtype=np.float64)[used], new[G].astype(np.int64)
 
 
-def _proxy_key(mesh: Mesh, n_target: int) -> str | None:
-    """The cache key of ``mesh``'s proxy; None where the mesh is its own proxy (at most
-    twice ``n_target``: decimating it would save less than it costs)."""
+def _proxy_key(mesh: Mesh, n_target: int) -> tuple[str | None, int]:
+    """The cache key of ``mesh``'s proxy and the checked ``n_target``; the key is None
+    where the mesh is its own proxy (at most twice ``n_target``: decimating it would save
+    less than it costs)."""
     n_target = integer(n_target, "proxy_vertices", lo=100)
-    return None if mesh.n_vertices <= 2 * n_target else _content_key(mesh, n_target)
+    key = None if mesh.n_vertices <= 2 * n_target else _content_key(mesh, n_target)
+    return key, n_target
 
 
 _pending: dict[str, Future] = {}
@@ -181,10 +183,9 @@ def start_decimation(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> bool
     >>> start_decimation(bar(), 20_000)  # small enough to be its own proxy
     False
     """
-    key = _proxy_key(mesh, n_target)
+    key, n_target = _proxy_key(mesh, n_target)
     if key is None:
         return False
-    n_target = int(n_target)
     with _cache_lock:
         if key in _cache or key in _pending:
             return False
@@ -228,10 +229,9 @@ def decimate(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> Mesh:
     >>> 200 < p.n_vertices < 400 and p.name.endswith("proxy")
     True
     """
-    key = _proxy_key(mesh, n_target)
+    key, n_target = _proxy_key(mesh, n_target)
     if key is None:
         return mesh
-    n_target = int(n_target)
     with _cache_lock:
         hit = _cache.get(key)
         if hit is not None:
