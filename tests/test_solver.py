@@ -2,6 +2,13 @@
 
 from __future__ import annotations
 
+import os
+import platform
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
 import numpy as np
 import pytest
 from conftest import data_path, independent_ring_edges
@@ -9,6 +16,8 @@ from conftest import data_path, independent_ring_edges
 from arapkit import Deformer, InputError, Mesh, load_mesh
 from arapkit.mesh.shapes import bar, bar_bend, bar_two_materials
 from arapkit.mesh.weights import edge_weights
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
 
 
 def brute_energy(mesh, w, rings, P, R):
@@ -334,3 +343,87 @@ def test_bar_r1_bends_smoothly():
     assert np.all(np.diff(theta) > 0), np.diff(theta).min()
     assert theta[0] < 5 and theta[-1] > 175
     assert np.abs(R[:, 1, 1] - 1).max() < 1e-6  # every turn is about the y axis
+
+
+def test_local_step_in_blocks_matches_whole_array_definitions():
+    # the fused local step works through each chunk in blocks of _BLOCK vertices; on two
+    # threads a 30K-vertex bar has chunks of several blocks and a short last one
+    import numba
+
+    from arapkit.arap.backends.cpu import _BLOCK, CPUBackend
+    from arapkit.arap.problem import ARAPProblem
+
+    m = bar(length=20.0, segments=(500, 12, 12))
+    h, t = bar_bend(m, 60)
+    p = ARAPProblem.from_mesh(m, h)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(min(2, threads))
+    try:
+        be = CPUBackend(p).bind(p)
+    finally:
+        numba.set_num_threads(threads)
+    sizes = np.diff(be.chunk_ptr)
+    assert sizes.max() > 2 * _BLOCK and (sizes % _BLOCK).any()
+    rng = np.random.default_rng(0)
+    n = p.n_vertices
+    P = p.vertices + 0.05 * rng.standard_normal((n, 3))
+    R = np.empty((n, 3, 3))
+    E = be.local(P, R)
+    rhs = np.empty((len(p.elimination.free), 3))
+    be.rhs(np.zeros_like(rhs), rhs)
+    # covariances S_k = sum_v c_kv (p_v - p_k)^T and rotations by NumPy's SVD
+    nbh = p.energy.nbh
+    k = np.repeat(np.arange(n), np.diff(nbh.disk_ptr))
+    S = np.einsum("ta,tb->tab", nbh.disk_coef, P[nbh.disk_idx] - P[k])
+    S = np.stack([np.bincount(k, S[:, a, b], n) for a in range(3) for b in range(3)],
+                 axis=1).reshape(n, 3, 3)
+    U, _, Vt = np.linalg.svd(S)
+    flip = np.linalg.det(np.swapaxes(Vt, 1, 2) @ np.swapaxes(U, 1, 2)) < 0
+    U[flip, :, 2] *= -1
+    R_ref = np.swapaxes(Vt, 1, 2) @ np.swapaxes(U, 1, 2)
+    np.testing.assert_allclose(R, R_ref, atol=1e-9)
+    # the energy against the edge-by-edge sum, the right-hand side b_v = sum_k R_k c_kv
+    assert E == pytest.approx(be.vertex_energy(P, R_ref).sum(), rel=1e-9)
+    b = np.einsum("tab,tb->ta", R_ref[k], nbh.disk_coef)
+    b = np.stack([np.bincount(nbh.disk_idx, b[:, a], n) for a in range(3)], axis=1)
+    np.testing.assert_allclose(rhs, b[p.elimination.free], atol=1e-9 * np.abs(b).max())
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="malloc_trim is glibc's")
+def test_return_free_memory_hands_freed_heap_pages_back():
+    # glibc keeps freed arrays below its (raised) mmap threshold in its heap; the call
+    # after a factorisation must give them back. A fresh interpreter: a clean heap.
+    code = textwrap.dedent("""
+        import numpy as np
+        from arapkit.arap.constraints import return_free_memory
+        def rss():
+            with open("/proc/self/statm") as f:
+                return int(f.read().split()[1]) * 4096 / 2**20
+        big = np.ones(30 * 2**17)      # freeing 30 MiB raises the threshold above 4 MiB
+        del big
+        keep, pins = [], []
+        for _ in range(60):            # 60 x 4 MiB from the heap, each pinned by 128 KiB
+            keep.append(np.ones(2**19))
+            pins.append(np.ones(2**14))
+        del keep
+        before = rss()
+        return_free_memory()
+        print(before - rss())
+    """)
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         check=True, env={**os.environ, "PYTHONPATH": SRC})
+    assert float(out.stdout) > 150  # MiB of the 240 freed
+
+
+def test_only_triangle_energies_keep_the_permuted_triangles():
+    # an r-ring problem reads edges only: its internal graph drops the faces (80 MB at
+    # 1.75M vertices); spokes-and-rims and SR-ARAP keep them, renumbered
+    from arapkit.arap.problem import ARAPProblem
+
+    m = bar(length=3.0, segments=(15, 2, 2))
+    h, _ = bar_bend(m, 90)
+    assert ARAPProblem.from_mesh(m, h).graph.faces is None
+    for energy in ("spokes-and-rims", "sr-arap"):
+        p = ARAPProblem.from_mesh(m, h, energy=energy)
+        np.testing.assert_array_equal(p.perm[p.graph.faces], m.faces)
+        np.testing.assert_array_equal(p.graph.face_edges, m.face_edges)

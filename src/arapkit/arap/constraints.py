@@ -291,6 +291,30 @@ def _flush_c_stdio() -> None:
         pass
 
 
+def return_free_memory() -> None:
+    """Hand the C heap's free pages back to the system (glibc's ``malloc_trim``).
+
+    glibc keeps what a large build frees (a factorisation's workspace, the matrices it was
+    assembled from) in its heaps for reuse, and raises its ``mmap`` threshold as it goes,
+    so that later arrays of up to 32 MiB come from those heaps as well: at 1.75M vertices
+    the editor's resident memory grew 0.7 GiB above what it had alive. Dask's workers trim
+    the same way. Elsewhere (no glibc) this does nothing.
+    """
+    global _TRIM
+    if _TRIM is None:
+        try:
+            import ctypes
+
+            _TRIM = ctypes.CDLL("libc.so.6").malloc_trim
+        except (OSError, AttributeError):
+            _TRIM = False
+    if _TRIM:
+        _TRIM(0)
+
+
+_TRIM = None
+
+
 @contextmanager
 def quiet_c_output():
     """Silence C-level stdout and stderr: CHOLMOD prints a warning before cholespy raises.

@@ -87,14 +87,19 @@ class EdgeGraph(EdgeTopology):
         return EdgeGraph(self.vertices * factor, self.edges, self.name, self.faces,
                          self.face_edges, (self.n_components, self.component_labels))
 
-    def permuted(self, perm: np.ndarray, iperm: np.ndarray) -> EdgeGraph:
-        """The same graph with vertex ``perm[i]`` renamed ``i`` (edge and face ids kept)."""
+    def permuted(self, perm: np.ndarray, iperm: np.ndarray, faces: bool = True) -> EdgeGraph:
+        """The same graph with vertex ``perm[i]`` renamed ``i`` (edge and face ids kept).
+
+        ``faces=False`` leaves the triangles out, for a user that needs only the edges
+        (an energy without triangle terms: the faces are 80 MB at 1.75M vertices).
+        """
+        keep = faces and self.faces is not None
         return EdgeGraph(
             np.ascontiguousarray(self.vertices[perm]),
             iperm[self.edges],
             self.name,
-            None if self.faces is None else iperm[self.faces],
-            self.face_edges,
+            iperm[self.faces] if keep else None,
+            self.face_edges if keep else None,
             (self.n_components, self.component_labels[perm]),
         )
 

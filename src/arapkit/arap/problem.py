@@ -29,7 +29,13 @@ import numpy as np
 
 from ..errors import Advice, InputError
 from ..mesh.weights import SOUND_WEIGHTS
-from .constraints import Elimination, Followers, anchor_components, check_handles
+from .constraints import (
+    Elimination,
+    Followers,
+    anchor_components,
+    check_handles,
+    return_free_memory,
+)
 from .energies import energy_info, make_energy
 from .graph import EdgeGraph, bandwidth_order, check_graph, unit_scale
 from .rings import check_rings
@@ -174,7 +180,7 @@ class ARAPProblem:
         perm = bandwidth_order(graph) if reorder and n > 1 else np.arange(n, dtype=np.int64)
         iperm = np.empty(n, dtype=np.int64)
         iperm[perm] = np.arange(n)
-        inner = graph.permuted(perm, iperm)
+        inner = graph.permuted(perm, iperm, faces=energy_info(energy).needs_faces)
         setup_ms = 1e3 * (time.perf_counter() - t0)
         h, extra, notes = cls._constraints(graph, handles, free_components)
         rings = check_rings(rings, n)
@@ -267,6 +273,7 @@ class ARAPProblem:
         )
         el = Elimination.from_edges(self.n_vertices, self.edges, self.energy.system_w,
                                     self.iperm[self.constrained], self.name, remedy)
+        return_free_memory()  # the factorisation's workspace and its matrices' copies
         self.timings["factorisation_ms"] = 1e3 * (time.perf_counter() - t0)
         return el
 

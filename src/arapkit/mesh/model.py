@@ -485,28 +485,29 @@ class Mesh(EdgeTopology):
         return np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
 
     @cached_property
-    def _edge_keys(self) -> tuple[np.ndarray, np.ndarray]:
-        """Sorted unique keys ``i * n + j`` (i < j) and the edge id of every half edge."""
-        return _unique_edges(np.ascontiguousarray(self.half_edges, dtype=np.int64),
-                             self.n_vertices)
+    def _edge_ids(self) -> tuple[np.ndarray, np.ndarray]:
+        """The unique edges (sorted ``(i, j)``, i < j) and the edge id of every half edge."""
+        n = self.n_vertices
+        ukeys, inverse = _unique_edges(np.ascontiguousarray(self.half_edges, dtype=np.int64), n)
+        # the keys themselves are not kept: 40 MB at 1.75M vertices, for nothing the edges
+        # do not also say
+        return np.stack([ukeys // n, ukeys % n], axis=1), inverse
 
-    @cached_property
+    @property
     def edges(self) -> np.ndarray:
         """Unique undirected edges ``(i, j)`` with ``i < j``, sorted lexicographically."""
-        ukeys = self._edge_keys[0]
-        n = self.n_vertices
-        return np.stack([ukeys // n, ukeys % n], axis=1)
+        return self._edge_ids[0]
 
     @property
     def face_edges(self) -> np.ndarray:
         """(m, 3) id in :attr:`edges` of edge ``(F[f, c], F[f, c+1])`` of each face."""
-        return self._edge_keys[1].reshape(3, -1).T
+        return self._edge_ids[1].reshape(3, -1).T
 
     @cached_property
     def edge_face_counts(self) -> np.ndarray:
         """Number of faces on each edge of :attr:`edges` (1 = boundary, >2 = non-manifold)."""
-        ukeys, inverse = self._edge_keys
-        return np.bincount(inverse, minlength=len(ukeys))
+        edges, inverse = self._edge_ids
+        return np.bincount(inverse, minlength=len(edges))
 
     @cached_property
     def unreferenced(self) -> np.ndarray:

@@ -36,83 +36,100 @@ _NO_ROT = np.zeros((0, 3, 3))
 # -- compiled kernels ---------------------------------------------------------------
 
 
+#: vertices whose covariances and rotations a chunk holds at once: two blocks of 36 KiB
+#: stay in cache, where one (n, 3, 3) array of covariances was 126 MB at 1.75M vertices
+_BLOCK = 512
+
+
 @nb.njit(parallel=True, cache=True, nogil=True)
-def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w, S, R, buf,
+def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w, R, buf,
                win_lo, win_off, partial, rc_ptr, rc_idx, rc_w, R_prev):
     """Fused local step: covariances, rotations and the scatter of the next right-hand side.
 
     Per chunk of consecutive k (one parallel region per iteration: on a shared machine
-    every extra region is a chance to wait for a descheduled thread):
+    every extra region is a chance to wait for a descheduled thread), block by block of
+    :data:`_BLOCK` vertices:
 
     1. ``S_k = sum_v c_kv (p'_v - p'_k)^T``. Subtracting p'_k is exact (the c_kv of a
        neighbourhood sum to zero) and keeps the sums well conditioned far from the origin.
        The upper Laplacian row of k adds its share of ``sum_e d_e w_e |e'|^2`` while those
        vertices are in cache.
-    2. ``R_k`` for the chunk at once (the vectorised kernel of :mod:`arapkit.arap.rotations`).
+    2. ``R_k`` for the block at once (the vectorised kernel of :mod:`arapkit.arap.rotations`).
     3. ``tr(R_k S_k)`` and ``b_v += R_k c_kv``. Scattering from k needs no transposed copy
        of the coefficients; each chunk adds into its own window
        ``[win_lo[c], win_lo[c] + len)`` of ``buf`` (no races), and with a bandwidth-reducing
        vertex order the windows barely overlap.
 
-    ``partial[c] = (sum tr(R_k S_k), quadratic term)`` for chunk c.
+    The covariances live only in the block's scratch: the per-vertex arithmetic and the
+    order of the chunk's sums are those of a whole-chunk pass, so the result is the same
+    to the bit. ``partial[c] = (sum tr(R_k S_k), quadratic term)`` for chunk c.
 
     A rotation coupling (SR-ARAP) adds ``sum_j rc_w R_prev[j]^T`` to ``S_k``; energies
     without one pass an empty ``rc_ptr`` and skip it.
     """
     coupled = rc_ptr.shape[0] > 0
     for c in nb.prange(chunk_ptr.shape[0] - 1):
-        k0, k1 = chunk_ptr[c], chunk_ptr[c + 1]
-        quad = 0.0
-        for k in range(k0, k1):
-            s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
-            px, py, pz = P[k, 0], P[k, 1], P[k, 2]
-            for t in range(disk_ptr[k], disk_ptr[k + 1]):
-                v = disk_idx[t]
-                dx, dy, dz = P[v, 0] - px, P[v, 1] - py, P[v, 2] - pz
-                c0, c1, c2 = disk_coef[t, 0], disk_coef[t, 1], disk_coef[t, 2]
-                s00 += c0 * dx
-                s01 += c0 * dy
-                s02 += c0 * dz
-                s10 += c1 * dx
-                s11 += c1 * dy
-                s12 += c1 * dz
-                s20 += c2 * dx
-                s21 += c2 * dy
-                s22 += c2 * dz
-            for t in range(up_ptr[k], up_ptr[k + 1]):
-                j = up_idx[t]
-                dx, dy, dz = P[j, 0] - px, P[j, 1] - py, P[j, 2] - pz
-                quad += up_w[t] * (dx * dx + dy * dy + dz * dz)
-            S[k, 0, 0], S[k, 0, 1], S[k, 0, 2] = s00, s01, s02
-            S[k, 1, 0], S[k, 1, 1], S[k, 1, 2] = s10, s11, s12
-            S[k, 2, 0], S[k, 2, 1], S[k, 2, 2] = s20, s21, s22
-        if coupled:
-            # a separate pass: inside the loop above it slows the uncoupled energies
-            for k in range(k0, k1):
-                for t in range(rc_ptr[k], rc_ptr[k + 1]):
-                    j, cw = rc_idx[t], rc_w[t]
-                    for a in range(3):
-                        for b in range(3):
-                            S[k, a, b] += cw * R_prev[j, b, a]
-        fit_rotation_range(S, R, k0, k1)
+        S = np.empty((_BLOCK, 3, 3))
+        Rb = np.empty((_BLOCK, 3, 3))
         off = win_off[c] - win_lo[c]
         for q in range(win_off[c], win_off[c + 1]):
             buf[q, 0] = 0.0
             buf[q, 1] = 0.0
             buf[q, 2] = 0.0
+        quad = 0.0
         tr = 0.0
-        for k in range(k0, k1):
-            r00, r01, r02 = R[k, 0, 0], R[k, 0, 1], R[k, 0, 2]
-            r10, r11, r12 = R[k, 1, 0], R[k, 1, 1], R[k, 1, 2]
-            r20, r21, r22 = R[k, 2, 0], R[k, 2, 1], R[k, 2, 2]
-            for a in range(3):
-                tr += R[k, a, 0] * S[k, 0, a] + R[k, a, 1] * S[k, 1, a] + R[k, a, 2] * S[k, 2, a]
-            for t in range(disk_ptr[k], disk_ptr[k + 1]):
-                q = off + disk_idx[t]
-                c0, c1, c2 = disk_coef[t, 0], disk_coef[t, 1], disk_coef[t, 2]
-                buf[q, 0] += r00 * c0 + r01 * c1 + r02 * c2
-                buf[q, 1] += r10 * c0 + r11 * c1 + r12 * c2
-                buf[q, 2] += r20 * c0 + r21 * c1 + r22 * c2
+        for b0 in range(chunk_ptr[c], chunk_ptr[c + 1], _BLOCK):
+            b1 = min(b0 + _BLOCK, chunk_ptr[c + 1])
+            for k in range(b0, b1):
+                s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
+                px, py, pz = P[k, 0], P[k, 1], P[k, 2]
+                for t in range(disk_ptr[k], disk_ptr[k + 1]):
+                    v = disk_idx[t]
+                    dx, dy, dz = P[v, 0] - px, P[v, 1] - py, P[v, 2] - pz
+                    c0, c1, c2 = disk_coef[t, 0], disk_coef[t, 1], disk_coef[t, 2]
+                    s00 += c0 * dx
+                    s01 += c0 * dy
+                    s02 += c0 * dz
+                    s10 += c1 * dx
+                    s11 += c1 * dy
+                    s12 += c1 * dz
+                    s20 += c2 * dx
+                    s21 += c2 * dy
+                    s22 += c2 * dz
+                for t in range(up_ptr[k], up_ptr[k + 1]):
+                    j = up_idx[t]
+                    dx, dy, dz = P[j, 0] - px, P[j, 1] - py, P[j, 2] - pz
+                    quad += up_w[t] * (dx * dx + dy * dy + dz * dz)
+                i = k - b0
+                S[i, 0, 0], S[i, 0, 1], S[i, 0, 2] = s00, s01, s02
+                S[i, 1, 0], S[i, 1, 1], S[i, 1, 2] = s10, s11, s12
+                S[i, 2, 0], S[i, 2, 1], S[i, 2, 2] = s20, s21, s22
+            if coupled:
+                # a separate pass: inside the loop above it slows the uncoupled energies
+                for k in range(b0, b1):
+                    for t in range(rc_ptr[k], rc_ptr[k + 1]):
+                        j, cw = rc_idx[t], rc_w[t]
+                        for a in range(3):
+                            for b in range(3):
+                                S[k - b0, a, b] += cw * R_prev[j, b, a]
+            fit_rotation_range(S, Rb, 0, b1 - b0)
+            for k in range(b0, b1):
+                i = k - b0
+                r00, r01, r02 = Rb[i, 0, 0], Rb[i, 0, 1], Rb[i, 0, 2]
+                r10, r11, r12 = Rb[i, 1, 0], Rb[i, 1, 1], Rb[i, 1, 2]
+                r20, r21, r22 = Rb[i, 2, 0], Rb[i, 2, 1], Rb[i, 2, 2]
+                R[k, 0, 0], R[k, 0, 1], R[k, 0, 2] = r00, r01, r02
+                R[k, 1, 0], R[k, 1, 1], R[k, 1, 2] = r10, r11, r12
+                R[k, 2, 0], R[k, 2, 1], R[k, 2, 2] = r20, r21, r22
+                for a in range(3):
+                    tr += (Rb[i, a, 0] * S[i, 0, a] + Rb[i, a, 1] * S[i, 1, a]
+                           + Rb[i, a, 2] * S[i, 2, a])
+                for t in range(disk_ptr[k], disk_ptr[k + 1]):
+                    q = off + disk_idx[t]
+                    c0, c1, c2 = disk_coef[t, 0], disk_coef[t, 1], disk_coef[t, 2]
+                    buf[q, 0] += r00 * c0 + r01 * c1 + r02 * c2
+                    buf[q, 1] += r10 * c0 + r11 * c1 + r12 * c2
+                    buf[q, 2] += r20 * c0 + r21 * c1 + r22 * c2
         partial[c, 0] = tr
         partial[c, 1] = quad
 
@@ -284,7 +301,6 @@ class CPUBackend:
         self.cover_idx = np.concatenate(cover).astype(np.int64)
         self.buf = np.zeros((total, 3))
         self.partial = np.zeros((len(lo), 2))
-        self.S = np.empty((n, 3, 3))
 
     def local(self, P: np.ndarray, R: np.ndarray, R_prev: np.ndarray = _NO_ROT) -> float:
         """Fit rotations to P (in place in R), scatter the right-hand side; return E(P, R).
@@ -293,7 +309,7 @@ class CPUBackend:
         """
         nbh = self.problem.energy.nbh
         local_step(P, self.chunk_ptr, nbh.disk_ptr, nbh.disk_idx, nbh.disk_coef,
-                   self.up_ptr, self.up_idx, self.up_w, self.S, R, self.buf,
+                   self.up_ptr, self.up_idx, self.up_w, R, self.buf,
                    self.win_lo, self.win_off, self.partial,
                    self.rc_ptr, self.rc_idx, self.rc_w, R_prev)
         tr, quad = self.partial.sum(axis=0)
