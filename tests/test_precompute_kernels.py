@@ -99,3 +99,19 @@ def test_mesh_edges_are_the_unique_sorted_keys(seed):
     np.testing.assert_array_equal(got.indptr, want.indptr)
     np.testing.assert_array_equal(got.indices, want.indices)
     np.testing.assert_array_equal(got.data, want.data)
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_mean_edge_length_is_the_mean_over_half_edges(seed):
+    # every face's three edges, a shared edge once per face, a zero-length edge included
+    rng = np.random.default_rng(seed)
+    n = 40
+    F = np.array([rng.choice(n, 3, replace=False) for _ in range(200)])
+    F[:10] = F[10]
+    V = rng.standard_normal((n, 3)) * [1.0, 10.0, 0.1]
+    V[F[20, 1]] = V[F[20, 0]]  # a zero-length edge
+    m = Mesh(V, F)
+    F = m.faces  # as the mesh keeps them
+    he = np.concatenate([F[:, [0, 1]], F[:, [1, 2]], F[:, [2, 0]]])
+    want = np.linalg.norm(V[he[:, 1]] - V[he[:, 0]], axis=1).mean()
+    assert m.mean_edge_length == pytest.approx(want, rel=1e-13)

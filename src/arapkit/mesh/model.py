@@ -8,6 +8,7 @@ what it can while saying so in :attr:`Mesh.notes`, and raises
 
 from __future__ import annotations
 
+import math
 from functools import cached_property
 
 import numba as nb
@@ -167,6 +168,20 @@ def vertex_adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray,
     eid = np.empty(2 * len(E), dtype=np.int32)
     _adjacency_rows(E, ptr, nbr, eid)
     return ptr, nbr, eid
+
+
+@nb.njit(cache=True, nogil=True)
+def _face_edge_length_sum(V, F):  # pragma: no cover - compiled
+    """Sum of |V[F[f, c+1]] - V[F[f, c]]| over every face f and corner c."""
+    total = 0.0
+    for f in range(F.shape[0]):
+        for c in range(3):
+            a, b = F[f, c], F[f, (c + 1) % 3]
+            dx = V[b, 0] - V[a, 0]
+            dy = V[b, 1] - V[a, 1]
+            dz = V[b, 2] - V[a, 2]
+            total += math.sqrt(dx * dx + dy * dy + dz * dz)
+    return total
 
 
 @nb.njit(cache=True, nogil=True)
@@ -547,11 +562,11 @@ class Mesh(EdgeTopology):
         ...       .mean_edge_length, 6)
         1.138071
         """
-        he = self.half_edges
-        if len(he) == 0:
+        if self.n_faces == 0:
             return 0.0
-        d = self.vertices[he[:, 1]] - self.vertices[he[:, 0]]
-        return float(np.sqrt(np.einsum("ij,ij->i", d, d)).mean())
+        # one compiled pass over the faces: NumPy's gathers of 3f edge vectors took 2.2 s at
+        # 1.75M vertices, on the editor's main thread while a mesh opens
+        return _face_edge_length_sum(self.vertices, self.faces) / (3 * self.n_faces)
 
     @cached_property
     def bounding_box_diagonal(self) -> float:
