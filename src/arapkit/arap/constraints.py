@@ -315,7 +315,7 @@ def return_free_memory() -> None:
         try:
             import ctypes
 
-            _TRIM = ctypes.CDLL("libc.so.6").malloc_trim
+            _TRIM = ctypes.CDLL(None).malloc_trim  # the C library this process runs on
         except (OSError, AttributeError):
             _TRIM = False
     if _TRIM:
