@@ -19,7 +19,7 @@ from arapkit import Deformer, InputError, Mesh
 from arapkit.arap.constraints import rigid_motions
 from arapkit.mesh.shapes import bar, bar_bend
 from arapkit.methods.deformer import MULTIRES_AUTO_VERTICES, coarse_to_fine
-from arapkit.methods.multires import MultiresDeformer, decimate
+from arapkit.methods.multires import MultiresDeformer, decimate, level_sizes
 
 
 @pytest.fixture(scope="module")
@@ -104,6 +104,69 @@ def test_coarse_start_saves_full_iterations_and_reaches_a_lower_energy(big, mult
     assert coarse.iterations < plain.iterations
     assert coarse.energy <= plain.energy * (1 + 1e-3)
     assert coarse.timings["proxy_iterations"] > 0
+
+
+@pytest.fixture(scope="module")
+def leveled(big):
+    """The bar with a 2K proxy and an 8K intermediate level (the scan's 20K and 100K)."""
+    mesh, h, _ = big
+    return MultiresDeformer(mesh, h, proxy_vertices=2_000, levels=[8_000])
+
+
+def test_the_level_rule_by_size():
+    assert level_sizes(299_999) == [] and level_sizes(300_000) == [100_000]
+    assert level_sizes(800_000) == [100_000] and level_sizes(800_001) == []
+    assert level_sizes(1_750_000) == [] and level_sizes(60_000, 4_000) == [20_000]
+
+
+def test_levels_make_the_solves_own_start_deterministically(big, leveled):
+    """solve = coarse_start -> fine_start (through the level) -> the full solve, bitwise;
+    a fresh solver gives the same; the level's start is nearer the result than the
+    proxy's skinned directly."""
+    mesh, h, t = big
+    d = leveled
+    res = d.solve(t)
+    (level,) = d.levels
+    assert 6_000 < level.mesh.n_vertices < 10_000 and len(level.handles) > 0
+    skinned, pres = d.coarse_start(t)
+    start, its = d.fine_start(t, pres)
+    assert its == res.timings["level_iterations"] > 0
+    assert np.array_equal(d.full.solve(t, init=start).vertices, res.vertices)
+    fresh = MultiresDeformer(mesh, h, proxy_vertices=2_000, levels=[8_000]).solve(t)
+    assert np.array_equal(fresh.vertices, res.vertices)
+    near = np.abs(start - res.vertices).max()
+    assert near < 0.5 * np.abs(skinned - res.vertices).max()
+    stopped, _ = d.fine_start(t, pres, stop=lambda: True)
+    assert stopped is None
+    assert "then a " in d.notes[0] and "-vertex level" in d.notes[0]
+
+
+def test_levels_keep_rigid_motions_rigid_and_follow_handle_changes(big, leveled):
+    mesh, h, t = big
+    d = leveled
+    R = Rotation.from_rotvec([0.2, 0.5, -0.3]).as_matrix()
+    V = mesh.vertices
+    res = d.solve(V[h] @ R.T + 1.5)
+    assert np.abs(res.vertices - (V @ R.T + 1.5)).max() < 1e-10 * _diag(mesh)
+    keep = h[: len(h) // 2]
+    T = V[keep] + [0.0, 0.2, 0.0]
+    d.set_handles(keep)
+    try:
+        fresh = MultiresDeformer(mesh, keep, proxy_vertices=2_000, levels=[8_000]).solve(T)
+        assert np.abs(d.solve(T).vertices - fresh.vertices).max() < 1e-10 * _diag(mesh)
+        assert np.array_equal(d.levels[0].solver.handles, d.levels[0].handles)
+    finally:
+        d.set_handles(h)
+
+
+@pytest.mark.parametrize("levels", [[1_000], [30_000], [8_000, 6_000], "many", [8_000.5]])
+def test_levels_out_of_range_are_refused_in_one_line(big, leveled, levels):
+    mesh, h, _ = big
+    with pytest.raises(InputError, match="levels") as e:
+        MultiresDeformer(mesh, h, proxy_vertices=2_000, levels=levels)
+    assert "\n" not in str(e.value)
+    with pytest.raises(InputError, match="levels is an option of multires=True"):
+        Deformer(bar(), [0], levels=[5])
 
 
 def test_handle_change_refactors_only_the_proxy_and_matches_a_fresh_factor(big):
@@ -196,11 +259,23 @@ def test_editor_release_is_the_exact_solve(big):
     assert np.abs(final.vertices - want.vertices).max() < 1e-9 * _diag(mesh)
 
 
-def test_a_release_with_the_factor_ready_previews_the_exact_solves_own_start(big):
+@pytest.mark.parametrize("with_level", [False, True])
+def test_a_release_with_the_factor_ready_previews_the_exact_solves_own_start(
+        big, with_level, monkeypatch):
     """Once the full factor is built, a release shows the proxy solved from rest (the start
     of the exact solve) instead of iterating the drag's shape to convergence first; the
-    result is still Deformer's."""
+    result is still Deformer's, also when the exact solve passes through a level."""
+    import arapkit.editor.worker as worker_module
+
     mesh, h, t = big
+    kind = MultiresDeformer
+    if with_level:
+        class Leveled(MultiresDeformer):
+            def __init__(self, *a, **k):
+                super().__init__(*a, proxy_vertices=2_000, levels=[8_000], **k)
+
+        kind = Leveled
+        monkeypatch.setattr(worker_module, "MultiresDeformer", Leveled)
     V = mesh.vertices
     updates, seqs, s = _run_worker(mesh, h, [
         (V[h] + (t - V[h]) / 3, False),  # an exact solve: the full factor is built after it
@@ -210,12 +285,13 @@ def test_a_release_with_the_factor_ready_previews_the_exact_solves_own_start(big
     mine = [u for u in updates if u.seq == seqs[-1]]
     assert [u.final for u in mine] == [False] * (len(mine) - 1) + [True]
     first, final = mine[0], mine[-1]
-    fresh = MultiresDeformer(mesh, h, tol=s.tol, max_iter=s.max_iter)
+    fresh = kind(mesh, h, tol=s.tol, max_iter=s.max_iter)
+    want = fresh.solve(t)
+    assert len(fresh.levels) == with_level
     start, pres = fresh.coarse_start(t)
     assert first.converged and first.iterations == pres.iterations
     np.testing.assert_array_equal(first.proxy_vertices, pres.vertices)
     np.testing.assert_array_equal(first.vertices, start)
-    want = fresh.solve(t)
     assert final.proxy_vertices is None
     assert np.abs(final.vertices - want.vertices).max() < 1e-9 * _diag(mesh)
 
@@ -246,8 +322,10 @@ def test_dragon_converges_within_60_plain_iterations_from_the_proxy():
     assert isinstance(d, MultiresDeformer)
     res = d.solve(T)
     plain = d.full.solve(T, accelerate=True)
-    # a proxy iteration costs about 1/20 of a full one
-    cost = res.iterations + res.timings["proxy_iterations"] * 20_000 / mesh.n_vertices
+    # a proxy iteration costs about 1/20 of a full one, a level's its size's share
+    (level,) = d.levels
+    cost = (res.iterations + res.timings["proxy_iterations"] * 20_000 / mesh.n_vertices
+            + res.timings["level_iterations"] * level.mesh.n_vertices / mesh.n_vertices)
     assert res.converged and cost <= 60
     assert res.energy <= plain.energy * (1 + 1e-3)
 

@@ -244,6 +244,10 @@ class Deformer:
     proxy_vertices : int, optional
         With coarse to fine: the proxy's size (default 20,000; a mesh of at most twice
         that is its own proxy).
+    levels : sequence of int, optional
+        With coarse to fine: the sizes of the intermediate meshes the exact solve passes
+        through (default: one of 100,000 vertices for meshes of 300,000 to 800,000;
+        ``()`` for none; see :func:`arapkit.methods.multires.level_sizes`).
     volumetric : bool
         Fill the closed surface with tetrahedra and solve r-ring ARAP on the volume's edge
         graph (the course report's "inner edges"); the result is still the surface's. This
@@ -269,16 +273,20 @@ class Deformer:
 
     def __new__(cls, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
                 volumetric: bool = False, density: float | None = None,
-                multires: bool | None = None, proxy_vertices: int | None = None, **options):
+                multires: bool | None = None, proxy_vertices: int | None = None,
+                levels=None, **options):
         if not volumetric:
             if density is not None:
                 raise InputError("density is an option of volumetric=True")
             if coarse_to_fine(mesh, multires, options):
                 if proxy_vertices is not None:
                     options["proxy_vertices"] = proxy_vertices
+                if levels is not None:
+                    options["levels"] = levels
                 return _VARIANTS["multires"](mesh, handles, rings, weights, **options)
-            if proxy_vertices is not None:
-                raise InputError("proxy_vertices is an option of multires=True")
+            for name, value in (("proxy_vertices", proxy_vertices), ("levels", levels)):
+                if value is not None:
+                    raise InputError(f"{name} is an option of multires=True")
             return super().__new__(cls)
         if multires:
             raise InputError("multires=True is for surfaces; volumetric=True solves the "
@@ -304,6 +312,7 @@ class Deformer:
         density: float | None = None,
         multires: bool | None = None,
         proxy_vertices: int | None = None,
+        levels=None,
         energy: str = "rring",
         sr_alpha: float | None = None,
         sr_roi=None,

@@ -64,8 +64,9 @@ from ..validate import MAX_RINGS, integer, ring_sizes
 from .deformer import MULTIRES_AUTO_VERTICES, Deformer, register_variant
 from .registry import method
 
-__all__ = ["AUTO_MIN_VERTICES", "DEFAULT_PROXY_VERTICES", "Binding", "MultiresDeformer",
-           "Preview", "decimate", "proxy_rings", "start_decimation"]
+__all__ = ["AUTO_MIN_VERTICES", "DEFAULT_PROXY_VERTICES", "Binding", "Level",
+           "MultiresDeformer", "Preview", "decimate", "level_sizes", "proxy_rings",
+           "start_decimation"]
 
 #: proxy size: its iteration (5–8 ms on two cores) leaves room for a 30 Hz frame
 DEFAULT_PROXY_VERTICES = 20_000
@@ -75,6 +76,13 @@ AUTO_MIN_VERTICES = MULTIRES_AUTO_VERTICES
 #: solve's, since its iterations are cheap and every one saves full-resolution ones
 PROXY_TOL = 1e-5
 PROXY_MAX_ITER = 2000
+#: the intermediate mesh of the exact solve (:func:`level_sizes`): this many times the proxy,
+#: for meshes from :data:`LEVEL_MIN_RATIO` to :data:`LEVEL_MAX_RATIO` times that
+LEVEL_RATIO = 5
+LEVEL_MIN_RATIO = 3
+LEVEL_MAX_RATIO = 8
+#: an intermediate mesh's stopping test: its iterations cost a quarter of the full mesh's
+LEVEL_TOL = 1e-4
 #: points per handle region that fit its rigid motion (a scan's region holds 10^5: fitting
 #: them all cost 57 ms a move at 1.75M; a rigid motion is found exactly from any three)
 FIT_POINTS = 2048
@@ -393,6 +401,85 @@ def _region_sample(region: np.ndarray, most: int) -> np.ndarray:
     return np.sort(np.concatenate(picks)) if picks else np.zeros(0, np.int64)
 
 
+def level_sizes(n_vertices: int, proxy_vertices: int = DEFAULT_PROXY_VERTICES) -> list[int]:
+    """The intermediate meshes' sizes of the exact solve, coarse first (the default rule).
+
+    One level of :data:`LEVEL_RATIO` times the proxy, for meshes of
+    :data:`LEVEL_MIN_RATIO` to :data:`LEVEL_MAX_RATIO` times that. On the 437K scan its
+    iterations (a quarter of a full one each) take the full solve from 29 iterations to
+    16, to a lower energy. Under the 1.75M dragon (17 times the level) the full solve
+    from its start took 109 iterations instead of 34, and a 400K level as well cost 0.7
+    GiB and saved no time: none there (``docs/interactive.md``).
+
+    Examples
+    --------
+    >>> level_sizes(437_645), level_sizes(250_000), level_sizes(1_746_838)
+    ([100000], [], [])
+    >>> level_sizes(60_000, proxy_vertices=4_000)
+    [20000]
+    """
+    size = LEVEL_RATIO * int(proxy_vertices)
+    fits = LEVEL_MIN_RATIO * size <= n_vertices <= LEVEL_MAX_RATIO * size
+    return [size] if fits else []
+
+
+def coarse_handles(binding: Binding, handles: np.ndarray, region: np.ndarray,
+                   n_full: int) -> tuple[np.ndarray, np.ndarray]:
+    """A coarser mesh's handles: its vertices bound to a full handle, with their regions.
+
+    Those whose nearest full vertex is a handle, and the nearest of each handle vertex
+    (so that a one-vertex handle is not lost); each takes the region of the handle it
+    reads (``region``: the region of each row of ``handles``).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> b = Binding.between(np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]]),
+    ...                     np.array([[0.1, 0, 0], [2.1, 0, 0]]))
+    >>> [a.tolist() for a in coarse_handles(b, np.array([2]), np.array([0]), 3)]
+    [[1], [0]]
+    """
+    pos = np.full(n_full, -1, dtype=np.int64)
+    pos[handles] = np.arange(len(handles))
+    near = binding.near_full
+    q1 = np.flatnonzero(pos[near] >= 0)
+    q = np.concatenate([q1, binding.idx[handles]])
+    src = np.concatenate([pos[near[q1]], np.arange(len(handles))])
+    picked, first = np.unique(q, return_index=True)
+    return picked, region[src[first]]
+
+
+@dataclass
+class Level:
+    """An intermediate mesh of the exact solve, between the proxy and the full mesh.
+
+    Attributes
+    ----------
+    mesh : Mesh
+        A decimation of the full mesh.
+    up : Binding
+        This mesh (as "full") against the next coarser one (the proxy for the first level):
+        how a coarser solution is skinned onto it.
+    full : Binding
+        The full mesh against this one: where its handles and r come from, and how its
+        solution is skinned onto the full mesh (the last level).
+    edge_ratio : float
+        ``h_full / h_level``, as :attr:`MultiresDeformer.edge_ratio`.
+    solver : Deformer or None
+        Its own solver, for the current handles and r (built with the full problem).
+    handles, region : (k,) int64
+        Its handle vertices and the full handle region each follows.
+    """
+
+    mesh: Mesh
+    up: Binding
+    full: Binding
+    edge_ratio: float
+    solver: Deformer | None = None
+    handles: np.ndarray | None = None
+    region: np.ndarray | None = None
+
+
 @dataclass
 class Preview:
     """One preview: the proxy's shape and, mapped from it, the full mesh's.
@@ -424,6 +511,11 @@ class MultiresDeformer:
         As for :class:`arapkit.Deformer`.
     proxy_vertices : int
         The proxy's size (default :data:`DEFAULT_PROXY_VERTICES`).
+    levels : sequence of int, optional
+        Sizes of the intermediate meshes the exact solve passes through between the proxy
+        and the full mesh, coarse first (each a decimation of the full mesh, solved to
+        :data:`LEVEL_TOL` from the coarser one's skinned solution). Default:
+        :func:`level_sizes`; ``()`` for none. The preview does not use them.
     background : bool
         Build the full-resolution problem and its factor on a background thread (the
         editor: the proxy can preview at once); :meth:`solve` waits for it.
@@ -439,6 +531,8 @@ class MultiresDeformer:
         The proxy's own solver (its handles are :meth:`proxy_targets`' rows).
     binding : Binding
         How full and proxy vertices correspond at rest.
+    levels : list of Level
+        The intermediate meshes, built with the full problem (empty until then).
     edge_ratio : float
         ``h_full / h_proxy``, the mean edge lengths' ratio that scales r onto the proxy.
 
@@ -455,8 +549,8 @@ class MultiresDeformer:
     """
 
     def __init__(self, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
-                 proxy_vertices: int = DEFAULT_PROXY_VERTICES, background: bool = False,
-                 **options) -> None:
+                 proxy_vertices: int = DEFAULT_PROXY_VERTICES, levels=None,
+                 background: bool = False, **options) -> None:
         energy = options.get("energy", "rring")
         if not method(energy).multires:
             raise InputError(f"multires: energy '{energy}' cannot be solved coarse to fine "
@@ -479,6 +573,8 @@ class MultiresDeformer:
         tree = full_tree_of(full)
         _ = mesh.mean_edge_length
         self.proxy_mesh = decimate(mesh, proxy_vertices)
+        self._level_sizes = self._check_levels(levels, proxy_vertices)
+        self.levels: list[Level] = []
         self.binding = Binding.between(full, self.proxy_mesh.vertices, tree)
         self.edge_ratio = mesh.mean_edge_length / max(self.proxy_mesh.mean_edge_length, 1e-300)
         self._map_handles()
@@ -505,8 +601,64 @@ class MultiresDeformer:
             self.prepare(background=True)
 
     # -- the full-resolution problem, built lazily or in the background --------------
+    def _check_levels(self, levels, proxy_vertices: int) -> list[int]:
+        n = self.mesh.n_vertices
+        if levels is None:
+            return level_sizes(n, proxy_vertices)
+        try:
+            sizes = [integer(k, "levels", lo=1) for k in levels]
+        except TypeError:
+            raise InputError(f"levels must be a sequence of vertex counts, got {levels!r}") \
+                from None
+        lo = self.proxy_mesh.n_vertices
+        for k in sizes:
+            if not lo < k <= n // 2:
+                raise InputError(
+                    f"levels: {k} vertices is not between the coarser mesh ({lo}) and half "
+                    f"the mesh ({n // 2}); give increasing sizes in that range")
+            lo = k
+        return sizes
+
+    def _make_levels(self) -> None:
+        """Decimate and bind the intermediate meshes (once: they depend on the mesh only)."""
+        for size in self._level_sizes:  # in a child process: the GIL stays free
+            start_decimation(self.mesh, size)
+        full = np.asarray(self.mesh.vertices, dtype=np.float64)
+        tree = full_tree_of(full) if self._level_sizes else None
+        coarser = self.proxy_mesh
+        for size in self._level_sizes:
+            m = decimate(self.mesh, size)
+            self.levels.append(Level(
+                m, Binding.between(m.vertices, coarser.vertices),
+                Binding.between(full, m.vertices, tree),
+                self.mesh.mean_edge_length / max(m.mean_edge_length, 1e-300)))
+            coarser = m
+
+    def _pose_level(self, level: Level, handles: np.ndarray, region: np.ndarray,
+                    rings: np.ndarray) -> None:
+        """Give ``level`` the full mesh's handles and r, and factorise its solver."""
+        lh, lr = coarse_handles(level.full, handles, region, self.mesh.n_vertices)
+        lrings = proxy_rings(rings, level.full.near_full, level.edge_ratio)
+        if level.solver is None:
+            level.solver = Deformer(level.mesh, lh, lrings, self._weights, energy=self.energy,
+                                    accelerate=True, free_components="follow", multires=False,
+                                    **{k: v for k, v in self._options.items()
+                                       if k in ("sr_alpha", "history")})
+        else:
+            if not np.array_equal(level.solver.handles, lh):
+                level.solver.set_handles(lh)
+            if not np.array_equal(level.solver.rings, lrings):
+                level.solver.set_rings(lrings)
+        level.solver.prepare()
+        level.handles, level.region = lh, lr
+
     def _build_full(self) -> Deformer:
         version, handles, rings = self._version, self.handles, self._rings
+        region = self._region
+        if len(self.levels) < len(self._level_sizes):
+            self._make_levels()
+        for level in self.levels:
+            self._pose_level(level, handles, region, rings)
         if self._full is None:
             self._full = Deformer(self.mesh, handles, rings, self._weights, multires=False,
                                   **self._options)
@@ -570,19 +722,14 @@ class MultiresDeformer:
     def _map_handles(self) -> None:
         """Proxy handles: proxy vertices bound to a handle, each with its handle region."""
         H = self.handles
-        pos = np.full(self.mesh.n_vertices, -1, dtype=np.int64)
-        pos[H] = np.arange(len(H))
-        near = self.binding.near_full
-        q1 = np.flatnonzero(pos[near] >= 0)
-        q = np.concatenate([q1, self.binding.idx[H]])
-        src = np.concatenate([pos[near[q1]], np.arange(len(H))])
-        self._proxy_handles, first = np.unique(q, return_index=True)
+        self._motions_for: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None
         self._last_targets: tuple[np.ndarray, np.ndarray] | None = None
         self._rest_handles = np.asarray(self.mesh.vertices, dtype=np.float64)[H]
         self._region = _handle_regions(self.mesh, H)
         self._n_regions = int(self._region.max()) + 1 if len(H) else 0
         self._fit = _region_sample(self._region, FIT_POINTS)
-        self._proxy_region = self._region[src[first]]
+        self._proxy_handles, self._proxy_region = coarse_handles(
+            self.binding, H, self._region, self.mesh.n_vertices)
 
     def _proxy_rings(self) -> np.ndarray:
         return proxy_rings(self._rings, self.binding.near_full, self.edge_ratio)
@@ -634,14 +781,22 @@ class MultiresDeformer:
         if last is not None and (last[0] is T or (last[0].shape == T.shape
                                                    and np.array_equal(last[0], T))):
             return last[1]
-        fit = self._fit
-        R, t = rigid_motions(self._rest_handles[fit], T[fit], self._region[fit],
-                             self._n_regions)
-        g = self._proxy_region
-        Q = self.proxy_mesh.vertices[self._proxy_handles]
-        out = np.einsum("vij,vj->vi", R[g], Q) + t[g]
+        out = self._moved(T, self.proxy_mesh.vertices[self._proxy_handles],
+                          self._proxy_region)
         self._last_targets = (T if not T.flags.writeable else T.copy(), out)
         return out
+
+    def _moved(self, T: np.ndarray, Q: np.ndarray, region: np.ndarray) -> np.ndarray:
+        """Rest points ``Q`` moved by the rigid motion fitted to each one's handle region."""
+        last = self._motions_for
+        if last is not None and last[0] is T and not T.flags.writeable:
+            R, t = last[1]
+        else:
+            fit = self._fit
+            R, t = rigid_motions(self._rest_handles[fit], T[fit], self._region[fit],
+                                 self._n_regions)
+            self._motions_for = (T, (R, t))
+        return np.einsum("vij,vj->vi", R[region], Q) + t[region]
 
     # -- configuration ------------------------------------------------------------------
     def set_handles(self, handles) -> None:
@@ -680,9 +835,10 @@ class MultiresDeformer:
     @property
     def notes(self) -> list[str]:
         """What was done about the input: the proxy, then the full problem's notes."""
-        pm = self.proxy_mesh
+        pm, full = self.proxy_mesh, self.full
+        via = "".join(f", then a {lv.mesh.n_vertices}-vertex level" for lv in self.levels)
         return [f"coarse to fine: a {pm.n_vertices}-vertex proxy (opened in "
-                f"{self._open_s:.1f} s) starts the full solve"] + self.full.notes
+                f"{self._open_s:.1f} s){via} starts the full solve"] + full.notes
 
     @property
     def timings(self) -> dict[str, float]:
@@ -728,17 +884,61 @@ class MultiresDeformer:
         return X
 
     def coarse_start(self, targets, callback=None) -> tuple[np.ndarray, Result]:
-        """The full solve's start: the proxy solved from rest to :data:`PROXY_TOL`, skinned.
+        """The exact solve's first stage: the proxy solved from rest to :data:`PROXY_TOL`.
 
-        ``solve(targets)`` is ``full.solve(targets, init=coarse_start(targets)[0])``: a
-        caller may show this shape (the editor does, as the settled preview) and then pass
-        it as ``init`` for the same result. ``callback`` is the proxy solve's (as for
-        :meth:`preview`); a start it stopped early is not the solve's.
+        Returns the proxy's solution skinned onto the full mesh (the editor shows it as the
+        settled preview) and the proxy's result, which :meth:`fine_start` takes on from:
+        ``solve(targets)`` is ``full.solve(targets, init=fine_start(targets, proxy)[0])``
+        with ``proxy = coarse_start(targets)[1]``. ``callback`` is the proxy solve's (as
+        for :meth:`preview`); a start it stopped early is not the solve's.
+        """
+        res = self._proxy_from_rest(self.checked_targets(targets), callback)
+        return self.to_full(res, targets), res
+
+    def _proxy_from_rest(self, T: np.ndarray, callback=None) -> Result:
+        return self.proxy.solve(self._proxy_targets(T), init="identity", tol=PROXY_TOL,
+                                max_iter=PROXY_MAX_ITER, callback=callback)
+
+    def fine_start(self, targets, proxy: Result,
+                   stop=None) -> tuple[np.ndarray | None, int]:
+        """The full solve's start from the proxy's: through :attr:`levels`, then skinned.
+
+        Each level starts from the coarser solution skinned onto it (handles at their
+        region's fitted motion) and is solved to :data:`LEVEL_TOL`. Waits for the full
+        problem (the levels are built with it).
+
+        Parameters
+        ----------
+        targets : (h, 3)
+            The full handles' targets.
+        proxy : Result
+            The proxy's solution, :meth:`coarse_start`'s second value.
+        stop : callable() -> bool, optional
+            Asked after every level iteration; when it says True the start is abandoned
+            (the editor: a newer request came) and None returned.
+
+        Returns
+        -------
+        start : (n, 3) or None
+        iterations : int
+            The levels' iterations.
         """
         T = self.checked_targets(targets)
-        res = self.proxy.solve(self._proxy_targets(T), init="identity", tol=PROXY_TOL,
-                               max_iter=PROXY_MAX_ITER, callback=callback)
-        return self.to_full(res, T), res
+        _ = self.full
+        Y, R, its = proxy.vertices, proxy.rotations, 0
+        for level in self.levels:
+            X = level.up.skin(Y, R)
+            LT = self._moved(T, level.mesh.vertices[level.handles], level.region)
+            res = level.solver.solve(LT, init=X, tol=LEVEL_TOL, max_iter=PROXY_MAX_ITER,
+                                     callback=None if stop is None else (lambda *_: stop()))
+            its += res.iterations
+            if stop is not None and not res.converged and stop():
+                return None, its
+            Y, R = res.vertices, res.rotations
+        binding = self.levels[-1].full if self.levels else self.binding
+        X = binding.skin(Y, R)
+        X[self.handles] = T
+        return X, its
 
     def solve(self, targets, init=None, tol: float | None = None,
               max_iter: int | None = None, callback=None,
@@ -747,18 +947,26 @@ class MultiresDeformer:
 
         With ``init=None`` the full solve starts from the skinned proxy solution (coarse to
         fine); an array or ``"identity"``/``"laplacian"`` starts it there instead, as for
-        :class:`arapkit.Deformer`. ``timings`` gains ``proxy_s`` and ``proxy_iterations``.
+        :class:`arapkit.Deformer`. ``timings`` gains ``proxy_s``, ``proxy_iterations``,
+        ``level_s`` and ``level_iterations``.
         """
         t0 = time.perf_counter()
-        proxy_its = 0
+        proxy_its = level_its = 0
+        t_proxy = t_levels = 0.0
         if init is None:
-            init, pres = self.coarse_start(targets)
+            pres = self._proxy_from_rest(self.checked_targets(targets))
             proxy_its = pres.iterations
-        t_proxy = time.perf_counter() - t0
-        res = self.full.solve(targets, init=init, tol=tol, max_iter=max_iter,
-                              callback=callback, accelerate=accelerate)
-        res.timings.update(proxy_s=t_proxy, proxy_iterations=proxy_its,
-                           total_s=time.perf_counter() - t0)
+            t_proxy = time.perf_counter() - t0
+            full = self.full  # built (or waited for) before the levels' clock starts
+            t1 = time.perf_counter()
+            init, level_its = self.fine_start(targets, pres)
+            t_levels = time.perf_counter() - t1
+        else:
+            full = self.full
+        res = full.solve(targets, init=init, tol=tol, max_iter=max_iter,
+                         callback=callback, accelerate=accelerate)
+        res.timings.update(proxy_s=t_proxy, proxy_iterations=proxy_its, level_s=t_levels,
+                           level_iterations=level_its, total_s=time.perf_counter() - t0)
         return res
 
 
