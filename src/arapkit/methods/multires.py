@@ -449,6 +449,15 @@ def coarse_handles(binding: Binding, handles: np.ndarray, region: np.ndarray,
     return picked, region[src[first]]
 
 
+def _repose(solver: Deformer, handles: np.ndarray, rings: np.ndarray) -> None:
+    """Give ``solver`` these handles and r where they changed, and factorise it."""
+    if not np.array_equal(solver.handles, handles):
+        solver.set_handles(handles)
+    if not np.array_equal(solver.rings, rings):
+        solver.set_rings(rings)
+    solver.prepare()
+
+
 @dataclass
 class Level:
     """An intermediate mesh of the exact solve, between the proxy and the full mesh.
@@ -644,12 +653,7 @@ class MultiresDeformer:
                                     accelerate=True, free_components="follow", multires=False,
                                     **{k: v for k, v in self._options.items()
                                        if k in ("sr_alpha", "history")})
-        else:
-            if not np.array_equal(level.solver.handles, lh):
-                level.solver.set_handles(lh)
-            if not np.array_equal(level.solver.rings, lrings):
-                level.solver.set_rings(lrings)
-        level.solver.prepare()
+        _repose(level.solver, lh, lrings)
         level.handles, level.region = lh, lr
 
     def _build_full(self) -> Deformer:
@@ -662,12 +666,7 @@ class MultiresDeformer:
         if self._full is None:
             self._full = Deformer(self.mesh, handles, rings, self._weights, multires=False,
                                   **self._options)
-        else:
-            if not np.array_equal(self._full.handles, handles):
-                self._full.set_handles(handles)
-            if not np.array_equal(self._full.rings, rings):
-                self._full.set_rings(rings)
-        self._full.prepare()
+        _repose(self._full, handles, rings)
         self._built = version
         return self._full
 
