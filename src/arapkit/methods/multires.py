@@ -10,10 +10,12 @@ milliseconds per iteration and converges in tens, so:
   ``v`` follows its nearest proxy vertex ``q`` at rest, ``x_v = y_q + R_q (v - q)``, with
   ``R_q`` the proxy's fitted rotation. A rigid motion of the handles gives a rigid proxy
   solution (every ``R_q`` that motion's rotation), so the preview is then exact;
-* **solve** (:meth:`MultiresDeformer.solve`): solve the proxy from rest, skin it, and run
-  the full-resolution local/global iteration (Anderson-accelerated) from there. The proxy
-  step is deterministic (same targets, same start), so the editor's result on release and
-  a script's ``Deformer(...).solve(targets)`` are the same computation.
+* **solve** (:meth:`MultiresDeformer.solve`): solve the proxy from rest, skin it (through
+  an intermediate level where :func:`level_sizes` gives one: a 100K decimation under a
+  300K–800K mesh, solved in its turn), and run the full-resolution local/global iteration
+  (Anderson-accelerated) from there. Every step is deterministic (same targets, same
+  start), so the editor's result on release and a script's ``Deformer(...).solve(targets)``
+  are the same computation.
 
 The proxy poses the same problem at its own scale: its handles are the proxy vertices bound
 to handle vertices, moved by the rigid motion fitted to each connected handle region
