@@ -381,14 +381,15 @@ class SolveWorker:
                               setup: float) -> None:
         """A large mesh: proxy previews, then (unless the request is live) the exact solve."""
         self.previewing = True
-        proxy = None
+        init = proxy = None
         if not req.live and d.full_ready:
             # the exact solve starts from the proxy solved from rest: shown as the settled
             # preview, it replaces iterating the last drag shape to convergence first
             # (0.3-0.5 s of a release at 437K)
-            proxy = self._coarse_preview(req, d, setup)
-            if proxy is None:
+            started = self._coarse_preview(req, d, setup)
+            if started is None:
                 return
+            init, proxy = started
         elif not self._preview(req, d, setup) or req.live:
             return
         first = {"sent": False, "last": time.perf_counter()}
@@ -405,8 +406,10 @@ class SolveWorker:
         while not d.wait_ready(0.05):  # the full factor: stay open to a newer request
             if self.has_newer:
                 return
-        init = None
-        if proxy is not None:  # on through the intermediate levels: solve()'s own start
+        if proxy is not None and d.levels:
+            # on through the intermediate levels to solve()'s own start; without one the
+            # settled preview is that start already (skinning it again costs tens of ms
+            # at 1.75M)
             init, _ = d.fine_start(req.targets, proxy, stop=lambda: self.has_newer)
             if init is None:
                 return
@@ -419,9 +422,9 @@ class SolveWorker:
         self._emit_result(req, d, res, V, setup)
 
     def _coarse_preview(self, req: SolveRequest, d: MultiresDeformer,
-                        setup: float) -> Any:
+                        setup: float) -> tuple[np.ndarray, Any] | None:
         """Send the exact solve's first stage (the proxy from rest, skinned) as the settled
-        preview and return the proxy's result (None when a newer request cut it short)."""
+        preview; return it and the proxy's result (None when a newer request cut it short)."""
         init, pres = d.coarse_start(req.targets, callback=lambda *_: self.has_newer)
         if self.has_newer:
             return None
@@ -429,7 +432,7 @@ class SolveWorker:
         self._emit(req, init, pres.energy, pres.iterations, True, False, setup_ms=setup,
                    proxy_mesh=d.proxy_mesh, proxy_vertices=pres.vertices)
         self._record_latency(req)
-        return pres
+        return init, pres
 
     def _preview(self, req: SolveRequest, d: MultiresDeformer, setup: float) -> bool:
         """Iterate the proxy a frame at a time, sending each shape; False if superseded."""

@@ -880,8 +880,11 @@ class MultiresDeformer:
 
     def to_full(self, proxy: Result, targets) -> np.ndarray:
         """The full mesh's shape from a proxy result: skinned, handles at ``targets``."""
-        X = self.binding.skin(proxy.vertices, proxy.rotations)
-        X[self.handles] = self.checked_targets(targets)
+        return self._onto_full(self.binding, proxy, self.checked_targets(targets))
+
+    def _onto_full(self, binding: Binding, coarse: Result, T: np.ndarray) -> np.ndarray:
+        X = binding.skin(coarse.vertices, coarse.rotations)
+        X[self.handles] = T
         return X
 
     def coarse_start(self, targets, callback=None) -> tuple[np.ndarray, Result]:
@@ -906,7 +909,8 @@ class MultiresDeformer:
 
         Each level starts from the coarser solution skinned onto it (handles at their
         region's fitted motion) and is solved to :data:`LEVEL_TOL`. Waits for the full
-        problem (the levels are built with it).
+        problem (the levels are built with it). Without levels this is
+        ``to_full(proxy, targets)``, :meth:`coarse_start`'s first value.
 
         Parameters
         ----------
@@ -926,20 +930,17 @@ class MultiresDeformer:
         """
         T = self.checked_targets(targets)
         _ = self.full
-        Y, R, its = proxy.vertices, proxy.rotations, 0
+        coarse, its = proxy, 0
         for level in self.levels:
-            X = level.up.skin(Y, R)
+            X = level.up.skin(coarse.vertices, coarse.rotations)
             LT = self._moved(T, level.mesh.vertices[level.handles], level.region)
-            res = level.solver.solve(LT, init=X, tol=LEVEL_TOL, max_iter=PROXY_MAX_ITER,
-                                     callback=None if stop is None else (lambda *_: stop()))
-            its += res.iterations
-            if stop is not None and not res.converged and stop():
+            coarse = level.solver.solve(LT, init=X, tol=LEVEL_TOL, max_iter=PROXY_MAX_ITER,
+                                        callback=None if stop is None else (lambda *_: stop()))
+            its += coarse.iterations
+            if stop is not None and not coarse.converged and stop():
                 return None, its
-            Y, R = res.vertices, res.rotations
         binding = self.levels[-1].full if self.levels else self.binding
-        X = binding.skin(Y, R)
-        X[self.handles] = T
-        return X, its
+        return self._onto_full(binding, coarse, T), its
 
     def solve(self, targets, init=None, tol: float | None = None,
               max_iter: int | None = None, callback=None,
@@ -954,16 +955,16 @@ class MultiresDeformer:
         t0 = time.perf_counter()
         proxy_its = level_its = 0
         t_proxy = t_levels = 0.0
+        pres = None
         if init is None:
             pres = self._proxy_from_rest(self.checked_targets(targets))
             proxy_its = pres.iterations
             t_proxy = time.perf_counter() - t0
-            full = self.full  # built (or waited for) before the levels' clock starts
+        full = self.full  # built (or waited for) before the levels' clock starts
+        if pres is not None:
             t1 = time.perf_counter()
             init, level_its = self.fine_start(targets, pres)
             t_levels = time.perf_counter() - t1
-        else:
-            full = self.full
         res = full.solve(targets, init=init, tol=tol, max_iter=max_iter,
                          callback=callback, accelerate=accelerate)
         res.timings.update(proxy_s=t_proxy, proxy_iterations=proxy_its, level_s=t_levels,
