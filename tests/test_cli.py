@@ -452,6 +452,27 @@ def test_usage_errors_exit_2(bar_file):
 # --------------------------------------------------------------------------- info
 
 
+@pytest.mark.parametrize("argv, line", [
+    # an option from another tool: the subcommand names it and the one it most likely meant
+    (["deform", "{mesh}", "-H", "h.json", "--method", "rring"],
+     "arapkit: error: arapkit deform: unrecognized arguments: --method rring; "
+     "did you mean --energy? (see arapkit deform --help)"),
+    (["deform", "{mesh}", "-H", "h.json", "--max-iters=5", "--iters", "4"],
+     "arapkit: error: arapkit deform: unrecognized arguments: --max-iters=5 --iters 4; "
+     "did you mean --max-iter for --max-iters, --max-iter for --iters? "
+     "(see arapkit deform --help)"),
+    (["info", "{mesh}", "--zzz"],
+     "arapkit: error: arapkit info: unrecognized arguments: --zzz (see arapkit info --help)"),
+    # the top level: its name opens the line once
+    (["--bogus"], "arapkit: error: unrecognized arguments: --bogus (see arapkit --help)"),
+])
+def test_unrecognized_arguments_name_the_subcommand(bar_file, argv, line):
+    mesh_path, _, _ = bar_file
+    proc = arapkit(*[a.format(mesh=mesh_path) for a in argv])
+    assert proc.returncode == 2 and error_line(proc) == line
+    assert proc.stdout == ""
+
+
 def test_info_on_builtin_bar(bar_file):
     mesh_path, V, F = bar_file
     proc = arapkit("info", mesh_path, "--json")

@@ -17,6 +17,7 @@ arapkit 0.1.0
 from __future__ import annotations
 
 import argparse
+import difflib
 import importlib
 import os
 import sys
@@ -49,12 +50,44 @@ _EPILOG = """examples (from a clone of the repository, which ships examples/):
 """
 
 
+#: options people bring from other tools, and this command line's name for them
+_ALIASES = {"--method": "--energy", "--iterations": "--max-iter", "--iters": "--max-iter",
+            "--out": "--output", "--ring": "--rings", "--weight": "--weights"}
+
+
 class _Parser(argparse.ArgumentParser):
     """argparse with one-line usage errors, like every other error of the command line."""
 
     def error(self, message: str):  # type: ignore[override]
-        self.exit(2, f"arapkit: error: {self.prog}: {' '.join(message.split())} "
+        # the top level's own name already opens the line: "arapkit: error: ..."
+        where = "" if self.prog == "arapkit" else f"{self.prog}: "
+        self.exit(2, f"arapkit: error: {where}{' '.join(message.split())} "
                      f"(see {self.prog} --help)\n")
+
+    def unrecognized(self, extra: list[str]) -> None:
+        """Refuse arguments this (sub)command does not take, naming the likely intended one.
+
+        Examples
+        --------
+        >>> build_parser().commands["deform"].suggestion("--method")
+        '--energy'
+        >>> build_parser().commands["deform"].suggestion("--max-iters=5")
+        '--max-iter'
+        """
+        hints = [(o.split("=")[0], self.suggestion(o)) for o in extra if o.startswith("--")]
+        hints = [(o, h) for o, h in hints if h]
+        hint = ("" if not hints else f"; did you mean {hints[0][1]}?" if len(hints) == 1
+                else "; did you mean " + ", ".join(f"{h} for {o}" for o, h in hints) + "?")
+        self.error(f"unrecognized arguments: {' '.join(extra)}{hint}")
+
+    def suggestion(self, option: str) -> str | None:
+        """The option of this parser that ``option`` most likely meant, or None."""
+        name = option.split("=")[0]
+        known = [o for o in self._option_string_actions if o.startswith("--")]
+        if _ALIASES.get(name) in known:
+            return _ALIASES[name]
+        close = difflib.get_close_matches(name, known, n=1, cutoff=0.75)
+        return close[0] if close else None
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -74,11 +107,14 @@ def build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"arapkit {__version__}")
-    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND", parser_class=_Parser)
+    #: each subcommand's own parser, which reports arguments it does not take
+    parser.commands = {}
     for name, module in COMMANDS:
         mod = importlib.import_module(module)
         sp = mod.add_parser(sub)
         sp.set_defaults(_run=mod.run, command=name)
+        parser.commands[name] = sp
     return parser
 
 
@@ -104,7 +140,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     """
     parser = build_parser()
     try:
-        args = parser.parse_args(argv)
+        args, extra = parser.parse_known_args(argv)
+        if extra:  # argparse would blame the top level; the subcommand knows its options
+            parser.commands.get(getattr(args, "command", None), parser).unrecognized(extra)
     except SystemExit as e:  # argparse: --help/--version (0) or a usage error (2)
         return int(e.code or 0)
     # the report records the command as typed, also when main() is called in-process
