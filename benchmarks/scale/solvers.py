@@ -14,7 +14,12 @@ child process of its own so that its peak memory (``ru_maxrss``) is its own:
   different right-hand side (as in the local/global loop);
 * ``gravomg``: Gravo MG (geometric multigrid) on the same ``A_ff`` (free vertices'
   rest positions, identity mass matrix);
-* ``splu``: scipy's SuperLU (a general LU, the fallback everyone has).
+* ``splu``: scipy's SuperLU (a general LU, the fallback everyone has);
+* ``pardiso``: Intel MKL PARDISO through pypardiso (wrapper BSD-3, MKL under Intel's
+  Simplified Software License, a 220 MB wheel, x86-64 only), symmetric positive definite
+  (mtype 2) on the upper triangle, nested-dissection ordering, no iterative refinement;
+* ``cvxopt-simplicial`` / ``cvxopt-supernodal``: CHOLMOD as CVXOPT's wheel bundles it
+  (GPL-3; AMD ordering, which cholespy cannot be told to use).
 
 Reported: analyse+factorise (or set-up) seconds, one solve of 3 right-hand sides
 (median of 3), relative residual, peak memory above the matrix-only baseline.
@@ -40,7 +45,7 @@ import scipy.sparse as sp
 from common import CACHE, base_and_top, dragon, dragon_subdivided, machine_load, peak_rss_mb, table
 
 SOLVERS = ("cholespy", "cholmod-supernodal", "cholmod-simplicial", "pyamg-cg", "gravomg",
-           "splu")
+           "splu", "pardiso", "cvxopt-simplicial", "cvxopt-supernodal")
 
 
 def reduced_system(mesh) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray]:
@@ -135,6 +140,38 @@ def run_child(name: str, path: Path) -> dict:
         def solve(b):
             return np.column_stack([f.solve(A, np.ascontiguousarray(b[:, k:k + 1])).ravel()
                                     for k in range(b.shape[1])])
+    elif name == "pardiso":
+        from pypardiso import PyPardisoSolver
+
+        U = sp.triu(A, format="csr")
+        U.sort_indices()
+        f = PyPardisoSolver(mtype=2)  # real symmetric positive definite: the upper triangle
+        f.set_iparm(1, 1)  # use the iparm given here, not PARDISO's defaults
+        f.set_iparm(2, 2)  # METIS nested dissection
+        f.set_iparm(8, 0)  # no iterative refinement
+        f.set_iparm(10, 13)
+        f.set_iparm(13, 0)
+        f.set_phase(12)  # analyse and factorise
+        f._call_pardiso(U, np.zeros((A.shape[0], 1), order="F"))
+
+        def solve(b):
+            f.set_phase(33)
+            return f._call_pardiso(U, np.asfortranarray(b))
+    elif name.startswith("cvxopt"):
+        import cvxopt
+        from cvxopt import cholmod
+
+        cholmod.options["supernodal"] = 2 if name.endswith("supernodal") else 0
+        L = sp.tril(A, format="coo")
+        M = cvxopt.spmatrix(cvxopt.matrix(L.data), cvxopt.matrix(L.row.astype(np.int64)),
+                            cvxopt.matrix(L.col.astype(np.int64)), size=A.shape)
+        f = cholmod.symbolic(M)
+        cholmod.numeric(M, f)
+
+        def solve(b):
+            X = cvxopt.matrix(np.asfortranarray(b))
+            cholmod.solve(f, X)  # one right-hand side at a time inside CVXOPT
+            return np.array(X)
     elif name == "splu":
         from scipy.sparse.linalg import splu
 
