@@ -159,6 +159,25 @@ def test_levels_keep_rigid_motions_rigid_and_follow_handle_changes(big, leveled)
         d.set_handles(h)
 
 
+def test_a_repainted_rigidity_map_reaches_the_level_and_matches_a_fresh_solver(big, leveled):
+    """Repainting r refactorises the proxy now and the level with the full mesh; the result
+    equals a fresh solver's with that map (1e-10), and the level reads r at its own scale."""
+    mesh, h, t = big
+    d = leveled
+    d.solve(t)  # the level's solver exists and is factorised before the repaint
+    r = np.where(mesh.vertices[:, 0] > 3.5, 8, 1)  # 2 on the level (edge ratio 0.25)
+    d.set_rings(r)
+    try:
+        res = d.solve(t)
+        (level,) = d.levels
+        want = np.clip(np.rint(r[level.full.near_full] * level.edge_ratio), 1, None)
+        assert np.array_equal(level.solver.rings, want) and want.max() > 1
+        fresh = MultiresDeformer(mesh, h, rings=r, proxy_vertices=2_000, levels=[8_000])
+        assert np.abs(res.vertices - fresh.solve(t).vertices).max() < 1e-10 * _diag(mesh)
+    finally:
+        d.set_rings(np.ones(mesh.n_vertices, dtype=int))
+
+
 @pytest.mark.parametrize("levels", [[1_000], [30_000], [8_000, 6_000], "many", [8_000.5]])
 def test_levels_out_of_range_are_refused_in_one_line(big, leveled, levels):
     mesh, h, _ = big
