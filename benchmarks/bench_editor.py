@@ -34,7 +34,9 @@ then also reports:
 * ``prev max/p95``: the last preview against the exact result for the same targets, as
   fractions of the bounding-box diagonal;
 * ``release s``: from the drag's release to the exact result sent;
-* ``handle s``: from adding a handle to the first shape that obeys it;
+* ``handle s``: from adding a handle to the first shape that obeys it, and ``repaint s``
+  from a brush stroke's end in the r view (whose coloured display is rebuilt) to the
+  first shape with the new r, both through the editor's own ``after_edit``;
 * ``peak GiB``: the process's peak resident memory from the editor's start (the mesh's
   loading and subdivision are not counted).
 
@@ -169,6 +171,22 @@ def peak_gib() -> float:
     return float("nan")
 
 
+def edit_to_shape(app, sends: list[tuple[int, float]], edit) -> float:
+    """Seconds from an edit (``edit()`` then the UI's ``after_edit``, under the editor's
+    lock, as a button or a brush stroke's end does it) to the first shape that obeys it."""
+    before = len(sends)
+    t0 = time.perf_counter()
+    with app.lock:
+        edit()
+        seq = app.after_edit()
+    deadline = time.perf_counter() + 600
+    while not any(s >= seq for s, _ in sends[before:]) and time.perf_counter() < deadline:
+        time.sleep(0.005)
+    shown = min(t for s, t in sends[before:] if s >= seq) - t0
+    app.wait_idle(1800)
+    return shown
+
+
 def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
              frame: np.ndarray | None = None) -> dict[str, float]:
     """One scripted drag; returns latency statistics in ms (and the large-mesh figures).
@@ -260,19 +278,17 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
             if last_preview and final is not None and final.proxy_vertices is None:
                 e = np.linalg.norm(last_preview[0].vertices - final.vertices, axis=1) / diag
                 out["prev_max"], out["prev_p95"] = float(e.max()), float(np.percentile(e, 95))
-            # a new handle (a vertex at the middle height, held where it is)
+            # a new handle (a vertex at the middle height, held where it is), then a
+            # brush stroke in the r view, each the way its button or stroke does it
             y = st.vertices[:, 1]
             mid = int(np.argmin(np.abs(y - np.median(y))))
-            before = len(sends)
-            t_h = time.perf_counter()
-            st.add_handle([mid], name="pin", frozen=True)
-            seq = app.request_solve()
-            deadline = time.perf_counter() + 600
-            while not any(s2 >= seq for s2, _ in sends[before:]) and \
-                    time.perf_counter() < deadline:
-                time.sleep(0.005)
-            out["handle_s"] = min(t for s2, t in sends[before:] if s2 >= seq) - t_h
+            out["handle_s"] = edit_to_shape(
+                app, sends, lambda: st.add_handle([mid], name="pin", frozen=True))
+            with app.lock:
+                app.dd_view.value = "Rigidity r"
             app.wait_idle(1800)
+            out["repaint_s"] = edit_to_shape(
+                app, sends, lambda: st.paint(st.vertices[mid], 0.05 * diag, r + 2))
             client.close()
             out["peak_gib"] = peak_gib()
             return out
@@ -333,6 +349,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"{s['rate']:.1f} upd/s sent, {s['client_rate']:.1f} upd/s and "
                   f"{s['client_mb_s']:.1f} MB/s at the client · release -> exact "
                   f"{s['release_s']:.2f} s · new handle -> shape {s['handle_s']:.2f} s · "
+                  f"repaint (r view) -> shape {s['repaint_s']:.2f} s · "
                   f"preview vs exact max {s.get('prev_max', float('nan')):.4f} p95 "
                   f"{s.get('prev_p95', float('nan')):.4f} of diag · peak "
                   f"{s['peak_gib']:.2f} GiB", flush=True)

@@ -85,6 +85,32 @@ def test_server_drag_paint_export_session(tmp_path):
         app.stop()
 
 
+def test_an_edit_is_solved_while_the_r_view_is_rebuilt(tmp_path, monkeypatch):
+    """after_edit asks for the solve before it rebuilds the display (a 1.75M-vertex r view
+    takes 0.2 s), returns its number, and that solve is the one shown with the new r."""
+    app = bar_app(tmp_path / "out")
+    try:
+        assert app.wait_idle(120)
+        st = app.state
+        with app.lock:
+            app.dd_view.value = "Rigidity r"
+        events = []
+        submit, redraw = app.worker.submit, app.redraw
+        monkeypatch.setattr(app.worker, "submit",
+                            lambda req: events.append(("solve", submit(req))) or events[-1][1])
+        monkeypatch.setattr(app, "redraw", lambda: (events.append(("redraw", None)), redraw()))
+        with app.lock:
+            st.paint(st.mesh.vertices[600], 0.5, 4)
+            seq = app.after_edit()
+        assert events == [("solve", seq), ("redraw", None)]
+        assert app.wait_idle(120) and app.last_update.seq == seq and app.last_update.final
+        painted = np.flatnonzero(st.rings == 4)
+        assert len(painted) > 0 and len(app._groups) == 2  # r = 1 and r = 4 drawn apart
+        assert app.after_edit(solve=False) is None
+    finally:
+        app.stop()
+
+
 TETRA_OFF = b"OFF\n4 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 2 1\n3 0 1 3\n3 0 3 2\n3 1 2 3\n"
 
 

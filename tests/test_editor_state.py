@@ -304,8 +304,14 @@ def test_face_groups_cover_every_face_once(st):
     groups = face_groups(st.mesh.faces, ring_labels(r), 6)
     assert sum(len(g.faces) for g in groups) == st.mesh.n_faces
     assert {g.label for g in groups} == {0, 2, 5}
+    flab = ring_labels(r)[st.mesh.faces].max(axis=1)
     for g in groups:
-        assert g.faces.max() < len(g.vertices)
+        # oracle: np.unique's sorted vertices and inverse numbering of the group's faces
+        mine = st.mesh.faces[flab == g.label]
+        vidx, local = np.unique(mine, return_inverse=True)
+        assert np.array_equal(g.vertices, vidx)
+        assert np.array_equal(g.faces, local.reshape(-1, 3))
+        assert np.array_equal(g.vertices[g.faces], mine)
 
 
 def test_cli_state_reads_handles_and_rings(tmp_path):

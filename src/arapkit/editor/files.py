@@ -107,7 +107,7 @@ class FileActions:
     bt_export: Any
     install_mesh: Callable[[], None]
     mesh_info: Callable[[], str]
-    after_edit: Callable[..., None]
+    after_edit: Callable[..., int | None]
     notify: Callable[..., None]
     ui: Callable[[Callable[[Any], None]], Callable[[Any], None]]
 

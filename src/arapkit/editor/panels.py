@@ -337,12 +337,15 @@ class Panels:
         self.bt_undo.disabled = not self.state.can_undo
         self.bt_redo.disabled = not self.state.can_redo
 
-    def after_edit(self, solve: bool = True) -> None:
-        """Refresh everything after an edit of handles or rings (not a drag)."""
+    def after_edit(self, solve: bool = True) -> int | None:
+        """Refresh everything after an edit of handles or rings (not a drag); returns the
+        solve's number (None when none was asked for)."""
         self.quietly(self.sync_gui_from_state)
+        # the solve first: it runs while the display is rebuilt (the r view of a
+        # 1.75M-vertex mesh, 0.2 s), and its shape waits for the lock held here
+        seq = self.request_solve() if solve else None
         self.redraw()
-        if solve:
-            self.request_solve()
+        return seq
 
     # ---------------------------------------------------------------- widget actions
     def _make_handle(self, frozen: bool = False) -> None:

@@ -155,7 +155,7 @@ class PointerTools:
     md_tool_help: Any
     sl_radius: Any
     sl_paint: Any
-    after_edit: Callable[..., None]
+    after_edit: Callable[..., int | None]
     draw_markers: Callable[[], None]
     mesh_nodes: Callable[[], list[Any]]
     notify: Callable[..., None]
