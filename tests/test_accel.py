@@ -131,7 +131,13 @@ def test_new_targets_never_refactorise(bent_bar, monkeypatch):
         d.solve(t2, max_iter=3)
         d.solve(t2, init="laplacian", max_iter=3, accelerate=True)
     assert len(made) == before + 1 and d.factorisations == 1
+    old = d.problem
+    with pytest.raises(InputError, match="rings"):
+        d.set_rings(np.zeros(m.n_vertices, dtype=int))
+    assert d.problem is old and old.factorised  # refused: nothing was let go
     d.set_rings(3)  # a new rigidity map changes the system: one more factorisation
+    # the old problem lets its factor go: it is not held beside the new one
+    assert not old.factorised and not d.problem.factorised
     d.solve(t, max_iter=2)
     assert d.factorisations == 2
 

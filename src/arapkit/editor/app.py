@@ -298,7 +298,7 @@ class EditorApp(Panels, PointerTools, FileActions):
             self.mesh_node.visible = False
             for g in face_groups(st.mesh.faces, labels, len(colors)):
                 node = self.server.scene.add_mesh_simple(
-                    f"/mesh/group{g.label}", V32[g.vertices], g.faces.astype(np.uint32),
+                    f"/mesh/group{g.label}", V32[g.vertices], g.faces,
                     color=colors[g.label], side="double",
                 )
                 self._groups.append((g, node))

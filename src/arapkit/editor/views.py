@@ -36,7 +36,7 @@ class FaceGroup:
 
     label: int
     vertices: np.ndarray  # (k,) indices into the full vertex array
-    faces: np.ndarray  # (m, 3) indices into ``vertices``
+    faces: np.ndarray  # (m, 3) uint32 indices into ``vertices``
 
 
 def ring_labels(rings: np.ndarray) -> np.ndarray:
@@ -129,7 +129,7 @@ def face_groups(faces: np.ndarray, vertex_labels: np.ndarray, n_labels: int) -> 
 @nb.njit(cache=True, nogil=True)
 def _face_labels(F, labels, n_labels):
     """Each face's label (the largest of its corners') and the number of faces per label."""
-    flab = np.empty(F.shape[0], dtype=np.int64)
+    flab = np.empty(F.shape[0], dtype=np.int16)
     count = np.zeros(n_labels, dtype=np.int64)
     for f in range(F.shape[0]):
         a = max(labels[F[f, 0]], labels[F[f, 1]], labels[F[f, 2]])
@@ -158,7 +158,7 @@ def _one_group(F, flab, k, size, n_vertices):
             vidx[j] = v
             local[v] = j
             j += 1
-    out = np.empty((size, 3), dtype=np.int64)
+    out = np.empty((size, 3), dtype=np.uint32)  # what the scene takes: no copy to send
     i = 0
     for f in range(F.shape[0]):
         if flab[f] == k:

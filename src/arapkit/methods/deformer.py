@@ -42,7 +42,7 @@ from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
 from ..arap.graph import bandwidth_order, unit_scale
 from ..arap.loop import Result, local_global
 from ..arap.problem import ARAPProblem
-from ..arap.rings import Neighbourhoods
+from ..arap.rings import Neighbourhoods, check_rings
 from ..errors import Advice, InputError
 from ..mesh.model import Mesh
 from ..mesh.weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
@@ -382,7 +382,9 @@ class Deformer:
             if not np.all(np.asarray(rings) == 1):
                 raise InputError(f"energy '{self.energy}' has no rigidity map (rings must be 1)")
             return
-        self.problem = p.with_rings(rings)
+        r = check_rings(rings, p.n_vertices)  # a bad map is refused with the factor kept
+        p.release_factor()  # of no use to the new map, and as large as the one to come
+        self.problem = p.with_rings(r)
         self.backend = make_backend(self.problem, self.device)
         self._rings = self.problem.energy.rings[self.problem.iperm]
         self._weight_notes = self._check_rest_is_minimum()
