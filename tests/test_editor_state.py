@@ -176,6 +176,34 @@ def test_flood_fill_stops_at_change_of_r(st):
     assert len(region) == 39 * RING + CAP
 
 
+def test_connected_region_matches_a_breadth_first_search_over_edges():
+    """Oracle: scipy's BFS over the mesh's edges with both ends in the mask, on a mesh of
+    two parts whose mask has holes (faces with a masked-out corner still join the rest)."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import breadth_first_order
+
+    from arapkit import Mesh
+    from arapkit.mesh.selection import connected_region
+    from arapkit.mesh.shapes import bar
+
+    one = bar(segments=(20, 4, 4))
+    V = np.concatenate([one.vertices, one.vertices + [0.0, 5.0, 0.0]])
+    F = np.concatenate([one.faces, one.faces + one.n_vertices])
+    mesh = Mesh(V, F)
+    rng = np.random.default_rng(3)
+    mask = (V[:, 0] < 1.2) | (V[:, 0] > 1.6) | (rng.random(len(V)) < 0.3)
+    e = mesh.edges[mask[mesh.edges[:, 0]] & mask[mesh.edges[:, 1]]]
+    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(V), len(V))).tocsr()
+    sizes = set()
+    for seed in rng.choice(np.flatnonzero(mask), 12, replace=False):
+        want = np.sort(breadth_first_order(g, seed, directed=False, return_predecessors=False))
+        got = connected_region(mesh.faces, mask, int(seed))
+        assert np.array_equal(got, want)
+        sizes.add(len(got))
+    assert len(sizes) > 1  # the seeds fell in different regions
+    assert connected_region(mesh.faces, mask, int(np.flatnonzero(~mask)[0])).size == 0
+
+
 def test_set_global_rings_and_bad_rings(st):
     st.set_global_rings(3)
     assert np.all(st.rings == 3)

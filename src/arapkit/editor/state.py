@@ -37,8 +37,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order
 
 from arapkit import validate
 from arapkit.editor import session as session_file
@@ -55,6 +53,7 @@ from arapkit.editor.handles import Handle
 from arapkit.editor.session import SESSION_FORMAT, SESSION_VERSION
 from arapkit.editor.settings import METHODS, SolverSettings
 from arapkit.errors import InputError
+from arapkit.mesh.selection import connected_region
 
 __all__ = ["METHODS", "MAX_UNDO", "SESSION_FORMAT", "SESSION_VERSION", "CameraView",
            "EditorState", "Handle", "SolverSettings", "quat_to_matrix", "raycast",
@@ -372,15 +371,7 @@ class EditorState:
         """Vertices reachable from ``seed`` through edges whose ends both have its ``r``."""
         if not 0 <= seed < self.n:
             raise InputError(f"flood fill: vertex {seed} out of range 0..{self.n - 1}")
-        same = self.rings == self.rings[seed]
-        e = np.asarray(self.mesh.edges)
-        # Keep only edges whose two ends have the seed's r: the region is one BFS tree.
-        e = e[same[e[:, 0]] & same[e[:, 1]]]
-        sub = sp.coo_matrix(
-            (np.ones(len(e), dtype=np.int8), (e[:, 0], e[:, 1])), shape=(self.n, self.n)
-        ).tocsr()
-        order = breadth_first_order(sub, seed, directed=False, return_predecessors=False)
-        return np.sort(order.astype(np.int64))
+        return connected_region(self.mesh.faces, self.rings == self.rings[seed], seed)
 
     def _assign(self, idx: np.ndarray, r: int, record: bool) -> int:
         r = validate.ring_size(r, "paint r")
