@@ -97,6 +97,46 @@ def test_camera_ray_hits_projected_point(st):
     assert raycast(st.vertices, np.asarray(st.mesh.faces), o, -d) is None
 
 
+def _raycast_by_arrays(V, F, o, d):
+    """Oracle: Moller-Trumbore over all faces at once with NumPy arrays."""
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    e1, e2 = b - a, c - a
+    p = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    ok = np.abs(det) > 1e-12 * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * \
+        np.linalg.norm(d)
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = o - a
+    u = np.einsum("ij,ij->i", s, p) * inv
+    q = np.cross(s, e1)
+    v = (q @ d) * inv
+    t = np.einsum("ij,ij->i", e2, q) * inv
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+    if not hit.any():
+        return None
+    f = int(np.flatnonzero(hit)[np.argmin(t[hit])])
+    return f, o + t[f] * d
+
+
+def test_raycast_matches_the_array_version_on_random_rays():
+    from arapkit.mesh.shapes import bar
+
+    m = bar(segments=(30, 6, 6))
+    V, F = m.vertices, m.faces
+    rng = np.random.default_rng(7)
+    hits = 0
+    for _ in range(200):
+        o = rng.uniform(-2, 9, 3)
+        d = rng.uniform(V.min(0), V.max(0)) - o
+        want, got = _raycast_by_arrays(V, F, o, d), raycast(V, F, o, d)
+        if want is None:
+            assert got is None
+            continue
+        hits += 1
+        assert got[0] == want[0] and np.allclose(got[1], want[1], rtol=0, atol=1e-12)
+    assert hits > 100
+
+
 # ------------------------------------------------------------------ handles
 
 

@@ -14,8 +14,10 @@ Examples
 from __future__ import annotations
 
 import dataclasses
+import math
 from collections.abc import Sequence
 
+import numba as nb
 import numpy as np
 
 __all__ = ["UP_AXES", "CameraView", "framing_distance", "in_screen_rect", "nearest_corner",
@@ -124,11 +126,13 @@ def framing_distance(vertices: np.ndarray, look_at: np.ndarray, toward_eye: np.n
 def raycast(
     vertices: np.ndarray, faces: np.ndarray, origin: np.ndarray, direction: np.ndarray
 ) -> tuple[int, np.ndarray] | None:
-    """Nearest face hit by a ray (Moller-Trumbore over all faces, vectorised).
+    """Nearest face hit by a ray (Moller-Trumbore over all faces, one compiled pass).
 
-    Returns ``(face_index, hit_point)`` or ``None`` when the ray misses.  Picking is
-    the only place the editor needs this, so a brute-force test (a few ms for 70K faces)
-    is preferred over building an acceleration structure per shape.
+    Returns ``(face_index, hit_point)`` or ``None`` when the ray misses; of faces hit at the
+    same distance, the first. Picking is the only place the editor needs this, and a
+    brute-force pass (40 ms for 3.5M faces) costs less than an acceleration structure
+    rebuilt for every shape. It is serial on purpose: the UI thread runs it beside the
+    solver's parallel kernels, which numba's ``workqueue`` layer cannot take.
 
     Examples
     --------
@@ -137,27 +141,42 @@ def raycast(
     >>> f, p.round(3).tolist()
     (0, [0.2, 0.2, 0.0])
     """
-    o = np.asarray(origin, dtype=np.float64)
-    d = np.asarray(direction, dtype=np.float64)
-    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
-    e1, e2 = b - a, c - a
-    p = np.cross(d, e2)
-    det = np.einsum("ij,ij->i", e1, p)
-    # parallel-ray test relative to the face's size: picking works at any mesh scale
-    size = np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1) * np.linalg.norm(d)
-    ok = np.abs(det) > 1e-12 * size
-    inv = np.zeros_like(det)
-    inv[ok] = 1.0 / det[ok]
-    s = o - a
-    u = np.einsum("ij,ij->i", s, p) * inv
-    q = np.cross(s, e1)
-    v = (q @ d) * inv
-    t = np.einsum("ij,ij->i", e2, q) * inv
-    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
-    if not hit.any():
-        return None
-    f = int(np.flatnonzero(hit)[np.argmin(t[hit])])
-    return f, o + t[f] * d
+    o = np.ascontiguousarray(origin, dtype=np.float64)
+    d = np.ascontiguousarray(direction, dtype=np.float64)
+    f, t = _nearest_hit(np.ascontiguousarray(vertices, dtype=np.float64),
+                        np.ascontiguousarray(faces, dtype=np.int64), o, d)
+    return None if f < 0 else (int(f), o + t * d)
+
+
+@nb.njit(cache=True, nogil=True)
+def _nearest_hit(V, F, o, d):  # pragma: no cover - compiled
+    """(face, t) of the nearest hit with t > 0, or (-1, inf)."""
+    dn = math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    best_f, best_t = -1, np.inf
+    for f in range(F.shape[0]):
+        i, j, k = F[f, 0], F[f, 1], F[f, 2]
+        e1x, e1y, e1z = V[j, 0] - V[i, 0], V[j, 1] - V[i, 1], V[j, 2] - V[i, 2]
+        e2x, e2y, e2z = V[k, 0] - V[i, 0], V[k, 1] - V[i, 1], V[k, 2] - V[i, 2]
+        px, py, pz = d[1] * e2z - d[2] * e2y, d[2] * e2x - d[0] * e2z, d[0] * e2y - d[1] * e2x
+        det = e1x * px + e1y * py + e1z * pz
+        # parallel-ray test relative to the face's size: picking works at any mesh scale
+        size = (math.sqrt(e1x * e1x + e1y * e1y + e1z * e1z)
+                * math.sqrt(e2x * e2x + e2y * e2y + e2z * e2z) * dn)
+        if not abs(det) > 1e-12 * size:
+            continue
+        inv = 1.0 / det
+        sx, sy, sz = o[0] - V[i, 0], o[1] - V[i, 1], o[2] - V[i, 2]
+        u = (sx * px + sy * py + sz * pz) * inv
+        if not u >= 0.0:
+            continue
+        qx, qy, qz = sy * e1z - sz * e1y, sz * e1x - sx * e1z, sx * e1y - sy * e1x
+        v = (qx * d[0] + qy * d[1] + qz * d[2]) * inv
+        if not (v >= 0.0 and u + v <= 1.0):
+            continue
+        t = (e2x * qx + e2y * qy + e2z * qz) * inv
+        if t > 0.0 and t < best_t:
+            best_f, best_t = f, t
+    return best_f, best_t
 
 
 def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
