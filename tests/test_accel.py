@@ -135,11 +135,16 @@ def test_new_targets_never_refactorise(bent_bar, monkeypatch):
     with pytest.raises(InputError, match="rings"):
         d.set_rings(np.zeros(m.n_vertices, dtype=int))
     assert d.problem is old and old.factorised  # refused: nothing was let go
+    d.set_handles(h.copy())  # a handle set (the same): refactorised, the old factor let go
+    assert not old.factorised and d.problem is not old
+    d.solve(t, max_iter=2)
+    assert d.factorisations == 2
+    old = d.problem
     d.set_rings(3)  # a new rigidity map changes the system: one more factorisation
     # the old problem lets its factor go: it is not held beside the new one
     assert not old.factorised and not d.problem.factorised
     d.solve(t, max_iter=2)
-    assert d.factorisations == 2
+    assert d.factorisations == 3
 
 
 def test_public_neighbourhoods_in_mesh_order(bent_bar):

@@ -373,7 +373,9 @@ class Deformer:
 
             self.embedded = EmbeddedDeformation(self.mesh, handles, len(self.embedded.nodes))
             return
-        self.problem = self.problem.with_handles(handles)
+        new = self.problem.with_handles(handles)  # checked first: a bad set keeps the factor
+        self.problem.release_factor()  # not held beside the new one by whoever keeps this
+        self.problem = new
 
     def set_rings(self, rings) -> None:
         """Use a new rigidity map (int or per-vertex); rebuilds neighbourhoods and the factor."""
