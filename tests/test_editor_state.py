@@ -118,6 +118,27 @@ def _raycast_by_arrays(V, F, o, d):
     return f, o + t[f] * d
 
 
+def test_pointer_kernels_are_compiled_once_for_read_only_and_writable_inputs():
+    """A mesh's arrays are read-only, a solved shape's are not: both reach one compiled
+    version, the one the editor loads in the background at start."""
+    from arapkit.editor.app import load_pointer_kernels
+    from arapkit.editor.geometry import _nearest_hit
+    from arapkit.editor.views import _face_labels, _one_group
+    from arapkit.mesh.selection import _reach, connected_region
+    from arapkit.mesh.shapes import bar
+
+    load_pointer_kernels()
+    m = bar(segments=(8, 2, 2))
+    V = np.array(m.vertices)  # writable, like the shapes the solver sends
+    assert not m.vertices.flags.writeable and V.flags.writeable
+    for P in (V, m.vertices):
+        assert raycast(P, m.faces, np.array([3.0, 0.05, 5.0]), np.array([0.0, 0.0, -1.0]))
+        face_groups(m.faces, (P[:, 0] > 3).astype(np.int64), 2)
+        connected_region(m.faces, P[:, 0] > 3, int(np.argmax(P[:, 0])))
+    for kernel in (_nearest_hit, _face_labels, _one_group, _reach):
+        assert len(kernel.signatures) == 1, kernel
+
+
 def test_raycast_matches_the_array_version_on_random_rays():
     from arapkit.mesh.shapes import bar
 

@@ -20,6 +20,8 @@ from collections.abc import Sequence
 import numba as nb
 import numpy as np
 
+from arapkit.mesh.model import kernel_input
+
 __all__ = ["UP_AXES", "CameraView", "framing_distance", "in_screen_rect", "nearest_corner",
            "nearest_vertex", "quat_to_matrix", "raycast", "vertex_normals", "vertices_within"]
 
@@ -141,10 +143,8 @@ def raycast(
     >>> f, p.round(3).tolist()
     (0, [0.2, 0.2, 0.0])
     """
-    o = np.ascontiguousarray(origin, dtype=np.float64)
-    d = np.ascontiguousarray(direction, dtype=np.float64)
-    f, t = _nearest_hit(np.ascontiguousarray(vertices, dtype=np.float64),
-                        np.ascontiguousarray(faces, dtype=np.int64), o, d)
+    o, d = kernel_input(origin, np.float64), kernel_input(direction, np.float64)
+    f, t = _nearest_hit(kernel_input(vertices, np.float64), kernel_input(faces, np.int64), o, d)
     return None if f < 0 else (int(f), o + t * d)
 
 

@@ -27,6 +27,7 @@ __all__ = [
     "bounding_box_diagonal",
     "check_number_range",
     "extent",
+    "kernel_input",
     "scale_free_vertices",
     "vertex_adjacency",
 ]
@@ -34,6 +35,24 @@ __all__ = [
 #: Coordinates (and the mesh's extent) inside ``[1/COORDINATE_RANGE, COORDINATE_RANGE]``
 #: keep every squared length and area of the solver a normal double.
 COORDINATE_RANGE = 1e150
+
+
+def kernel_input(a, dtype) -> np.ndarray:
+    """``a`` as a C-contiguous, read-only array of ``dtype`` (copied only where it must be).
+
+    numba compiles one version of a kernel per argument type, and a read-only array is
+    another type than a writable one: a mesh's own arrays are read-only, shapes the solver
+    sends are not. Passing every input this way keeps one compiled version, which can then
+    be loaded before it is needed.
+
+    Examples
+    --------
+    >>> kernel_input([[0, 1, 2]], np.int64).flags.writeable
+    False
+    """
+    out = np.ascontiguousarray(a, dtype=dtype).view()
+    out.flags.writeable = False
+    return out
 
 
 def check_number_range(vertices: np.ndarray, name: str = "mesh") -> None:

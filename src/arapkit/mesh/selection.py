@@ -21,7 +21,7 @@ import numba as nb
 import numpy as np
 
 from ..errors import InputError
-from .model import COORDINATE_RANGE, extent
+from .model import COORDINATE_RANGE, extent, kernel_input
 
 __all__ = [
     "HandleContext",
@@ -123,8 +123,8 @@ def connected_region(faces: np.ndarray, mask: np.ndarray, seed: int) -> np.ndarr
     >>> connected_region(F, np.ones(6, dtype=bool), 5).tolist()
     [0, 1, 2, 3, 4, 5]
     """
-    F = np.ascontiguousarray(faces, dtype=np.int64)
-    return np.flatnonzero(_reach(F, np.ascontiguousarray(mask, dtype=np.bool_), int(seed)))
+    return np.flatnonzero(_reach(kernel_input(faces, np.int64), kernel_input(mask, np.bool_),
+                                 int(seed)))
 
 
 @nb.njit(cache=True, nogil=True)
