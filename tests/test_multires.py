@@ -487,10 +487,34 @@ def test_decimating_in_a_child_process_gives_the_same_proxy(big):
     assert not mr.start_decimation(mesh, 5_000)  # already on its way (or done)
     p = decimate(mesh, 5_000)
     assert key not in mr._pending and key in mr._cache
-    expected = Mesh(*mr._proxy_arrays(*here))  # the same repairs (degenerate faces dropped)
+    expected = Mesh(*mr._proxy_arrays(*here, mr._frame(mesh)))  # the same repairs
     assert np.array_equal(p.vertices, expected.vertices)
     assert np.array_equal(p.faces, expected.faces)
     assert not mr.start_decimation(mesh, 5_000)  # cached
+
+
+def test_the_proxy_does_not_depend_on_units_or_placement():
+    """The decimator's error threshold is absolute: fed raw coordinates, a scan in
+    micrometres (or far from the origin, in float32) kept nearly every vertex. In the unit
+    frame a power-of-two scale gives the same proxy to the bit, scaled, and a far placement
+    the same proxy, moved."""
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    ball = trimesh.creation.icosphere(subdivisions=6)  # 40,962 vertices
+    rng = np.random.default_rng(0)
+    mesh = Mesh(ball.vertices * (1 + 0.02 * rng.standard_normal((len(ball.vertices), 1))),
+                ball.faces)
+    ref = decimate(mesh, 2_000)
+    assert 1_500 < ref.n_vertices < 2_500
+    scaled = decimate(Mesh(mesh.vertices * 2.0**20, mesh.faces), 2_000)
+    assert np.array_equal(scaled.faces, ref.faces)
+    assert np.array_equal(scaled.vertices, ref.vertices * 2.0**20)
+    shift = np.array([3e5, -2e5, 1e5])
+    moved = decimate(Mesh(mesh.vertices + shift, mesh.faces), 2_000)
+    assert abs(moved.n_vertices - ref.n_vertices) < 0.05 * ref.n_vertices
+    gap, _ = cKDTree(ref.vertices + shift).query(moved.vertices)
+    assert gap.max() < 0.05 * _diag(mesh)
 
 
 def test_the_editor_starts_a_large_meshs_proxy_before_solving(big, monkeypatch):
