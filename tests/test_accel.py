@@ -66,6 +66,37 @@ def test_accelerated_is_faster_to_a_given_energy(bent_bar):
     assert its[1] < 0.5 * its[0], its
 
 
+def test_a_stalled_extrapolation_never_ends_the_solve(bent_bar, monkeypatch):
+    """Converged means a plain local/global step lowers the energy by less than tol. An
+    extrapolation that only creeps (here one millionth of the way to the plain step: it
+    lowers the energy, by less than tol) must not end the solve: after each, a plain step
+    decides, and the solve ends where the plain one does. Kept as the end, it ended the
+    solve at the third iteration."""
+    import arapkit.arap.loop as loop
+
+    class Creep:
+        def __init__(self, dim, m=5):
+            self.seen = False
+
+        def step(self, x, g, out=None):
+            if not self.seen:  # like Anderson: the first call only records
+                self.seen = True
+                return None
+            out[:] = x + 1e-6 * (g - x)
+            return out
+
+    m, h, t = bent_bar
+    plain = Deformer(m, h, accelerate=False).solve(t)
+    monkeypatch.setattr(loop, "Anderson", Creep)
+    crept = Deformer(m, h, accelerate=True).solve(t)
+    assert plain.iterations > 10
+    # every other step creeps: as many plain steps as the plain solve, and the same end
+    assert 2 * plain.iterations - 3 <= crept.iterations <= 2 * plain.iterations + 1
+    assert crept.timings["accel_rejected"] == 0
+    assert abs(crept.energy - plain.energy) < 1e-4 * plain.energy  # tol is 1e-3
+    assert np.abs(crept.vertices - plain.vertices).max() < 1e-3 * m.bounding_box_diagonal
+
+
 def test_accelerate_override_per_solve(bent_bar):
     m, h, t = bent_bar
     d = Deformer(m, h, accelerate=True)
