@@ -65,6 +65,7 @@ def test_a_colour_view_sends_each_shape_once(tmp_path):
             app.dd_view.value = "Rigidity r"
         assert app.wait_idle(120) and app._groups
         hidden_before = np.array(app.mesh_node.vertices)
+        before = app.served_vertices()
         start = tip.position.copy()
         for k, phase in enumerate(["start", "end"]):
             app.drag_handle("free end", (1, 0, 0, 0), start + [0, 0, 0.3 * k], phase)
@@ -72,11 +73,45 @@ def test_a_colour_view_sends_each_shape_once(tmp_path):
         assert np.array_equal(app.mesh_node.vertices, hidden_before)  # not sent
         shown = app.served_vertices()
         assert np.abs(shown - st.vertices).max() < 1e-5  # float32 on the wire
-        assert np.abs(shown[tip.vertices] - hidden_before[tip.vertices]).max() > 0.29
+        assert np.abs(shown[tip.vertices] - before[tip.vertices]).max() > 0.29
         with app.lock:
             app.dd_view.value = "Shaded"
         assert app.wait_idle(120) and not app._groups
-        assert np.abs(np.asarray(app.mesh_node.vertices) - st.vertices).max() < 1e-5
+        assert np.abs(app.served_vertices() - st.vertices).max() < 1e-5
+    finally:
+        app.stop()
+
+
+def test_a_far_placed_mesh_keeps_its_detail_in_the_scene(tmp_path):
+    """A georeferenced scan (coordinates near 5e6) in float32 world coordinates would be
+    drawn in 0.5 m steps; the mesh and its dots are sent relative to the mesh's centre,
+    under frames placed there, and keep float32's precision at the mesh's own size."""
+    from arapkit import Mesh
+    from arapkit.editor.state import EditorState
+    from arapkit.mesh.shapes import bar
+
+    shift = np.array([5e5, 5e6, 100.0])
+    m = bar()
+    st = EditorState(Mesh(m.vertices + shift, m.faces))
+    x = m.vertices[:, 0]
+    st.add_handle(np.flatnonzero(x == x.min()), name="fixed end", frozen=True)
+    tip = st.add_handle(np.flatnonzero(x == x.max()), name="free end")
+    app = EditorApp(st, port=free_port(), export_dir=tmp_path / "out")
+    try:
+        assert app.wait_idle(120)
+        rest = st.mesh.vertices
+        centre = (rest.min(axis=0) + rest.max(axis=0)) / 2
+        assert all(np.array_equal(f.position, centre) for f in app._frames)
+        start = tip.position.copy()
+        for k, phase in enumerate(["start", "end"]):
+            app.drag_handle("free end", (1, 0, 0, 0), start + [0, 0, 0.3 * k], phase)
+        assert app.wait_idle(120)
+        assert np.abs(st.handle("free end").position - start - [0, 0, 0.3]).max() < 1e-9
+        # world float32 would be off by up to 0.25 here; the bar is 7 long
+        assert np.abs(app.served_vertices() - st.vertices).max() < 1e-5
+        dots = app._markers["handles"].points
+        idx = np.concatenate([h.vertices for h in st.handles])
+        assert np.abs(np.asarray(dots, np.float64) + centre - st.vertices[idx]).max() < 1e-5
     finally:
         app.stop()
 

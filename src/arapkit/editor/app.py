@@ -144,6 +144,12 @@ class EditorApp(Panels, PointerTools, FileActions):
         self._gizmos: list[Any] = []
         self._gizmo_serial = 0
         self._markers: dict[str, Any] = {}
+        #: the mesh's box centre: the mesh and its dots are sent relative to it, under
+        #: frames placed there (float32 keeps 0.5 m at 5e6: a georeferenced scan drawn in
+        #: world coordinates would show in steps; the browser composes the frame's float64
+        #: offset with the camera's before its float32 upload, so nothing is lost)
+        self._origin = np.zeros(3)
+        self._frames: list[Any] = []
         self.mesh_node: Any = None
         #: a large mesh's proxy, shown instead of the mesh while a drag is previewed
         self.proxy_node: Any = None
@@ -198,7 +204,20 @@ class EditorApp(Panels, PointerTools, FileActions):
             out = out.copy()
             for g, node in self._groups:
                 out[g.vertices] = node.vertices
-        return out
+        return out + self._origin
+
+    def local32(self, V: np.ndarray) -> np.ndarray:
+        """World positions as the scene holds them: float32, relative to the mesh's centre."""
+        return (np.asarray(V, dtype=np.float64) - self._origin).astype(np.float32)
+
+    def _place_frames(self, origin: np.ndarray) -> None:
+        """Put the frames that hold the mesh and its dots at ``origin`` (world)."""
+        self._origin = np.asarray(origin, dtype=np.float64)
+        if not self._frames:
+            self._frames = [self.server.scene.add_frame(name, show_axes=False)
+                            for name in ("/mesh", "/markers")]
+        for frame in self._frames:
+            frame.position = tuple(self._origin)
 
     # ================================================================ scene set-up
     def install_mesh(self) -> None:
@@ -213,6 +232,7 @@ class EditorApp(Panels, PointerTools, FileActions):
             self.worker.reset_shape(V, st.mesh)
             self.vertex_energy = None
             self.last_update = None
+            self._place_frames((lo + hi) / 2)
             if self.mesh_node is not None:
                 self.mesh_node.remove()
             if self.proxy_node is not None:
@@ -220,11 +240,11 @@ class EditorApp(Panels, PointerTools, FileActions):
             # a large mesh's preview draws this node (hidden until then; its faces are set
             # when the proxy is known)
             self.proxy_node = self.server.scene.add_mesh_simple(
-                "/mesh/preview", V[:3].astype(np.float32), np.array([[0, 1, 2]], np.uint32),
+                "/mesh/preview", self.local32(V[:3]), np.array([[0, 1, 2]], np.uint32),
                 color=SHADED_COLOR, side="double", visible=False)
             self._proxy_of = None
             self.mesh_node = self.server.scene.add_mesh_simple(
-                "/mesh/shaded", V.astype(np.float32), np.asarray(st.mesh.faces, np.uint32),
+                "/mesh/shaded", self.local32(V), np.asarray(st.mesh.faces, np.uint32),
                 color=SHADED_COLOR, side="double",
             )
             self._centre = (lo + hi) / 2
@@ -300,7 +320,7 @@ class EditorApp(Panels, PointerTools, FileActions):
             node.remove()
         self._groups = []
         st = self.state
-        V32 = st.vertices.astype(np.float32)
+        V32 = self.local32(st.vertices)
         view = self.dd_view.value
         labels, colors, legend = None, (), ""
         if view == "Rigidity r":
@@ -333,7 +353,7 @@ class EditorApp(Panels, PointerTools, FileActions):
 
     def _refresh_vertices(self, V: np.ndarray) -> None:
         """Send new positions only (a drag): the colour split stays as it is."""
-        V32 = V.astype(np.float32)
+        V32 = self.local32(V)
         if not self._groups:
             self.mesh_node.vertices = V32
         # In a colour view the shaded node is hidden: sending it too doubled every shape
@@ -355,7 +375,7 @@ class EditorApp(Panels, PointerTools, FileActions):
 
         The full mesh is hidden meanwhile and sent once, when the exact shape arrives.
         """
-        P32 = np.asarray(P, dtype=np.float32)
+        P32 = self.local32(P)
         node = self.proxy_node
         node.vertices = P32
         if self._proxy_of is not proxy_mesh:
@@ -387,7 +407,7 @@ class EditorApp(Panels, PointerTools, FileActions):
     def show_points(self, key: str, idx: np.ndarray, colors: Any, size: float) -> None:
         """Show the vertices ``idx`` as round dots, as the marker layer ``key``."""
         self._markers[key] = self.server.scene.add_point_cloud(
-            f"/markers/{key}", self.state.vertices[idx].astype(np.float32),
+            f"/markers/{key}", self.local32(self.state.vertices[idx]),
             np.asarray(colors, np.uint8), point_size=size, point_shape="circle",
             precision="float32",
         )
