@@ -247,7 +247,6 @@ class EditorApp(Panels, PointerTools, FileActions):
                 "/mesh/shaded", self.local32(V), np.asarray(st.mesh.faces, np.uint32),
                 color=SHADED_COLOR, side="double",
             )
-            self._centre = (lo + hi) / 2
             self.quietly(self._choose_up)
             self.aim_cameras()
             self.active = st.handles[-1].name if st.handles else None
@@ -278,7 +277,7 @@ class EditorApp(Panels, PointerTools, FileActions):
         front = view_frame(self.state.vertices, "front", up_name)[0][2]
         front = front - (front @ up) * up
         front /= np.linalg.norm(front)
-        centre = self._centre
+        centre = self._origin
         toward_eye = 0.9 * front + 0.55 * up + 0.15 * np.cross(up, front)
         toward_eye /= np.linalg.norm(toward_eye)
         # the scene left of the GUI panel is about 840 x 800 pixels in a 1200 x 800 window

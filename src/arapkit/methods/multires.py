@@ -104,14 +104,13 @@ def _content_key(mesh: Mesh, n_target: int) -> str:
 
 
 def _frame(mesh: Mesh) -> tuple[np.ndarray, float]:
-    """The corner and size of ``mesh``'s bounding box: the decimator's unit frame."""
-    lo = mesh.vertices.min(axis=0)
-    size = float(np.linalg.norm(mesh.vertices.max(axis=0) - lo))
-    return lo, (size if size > 0 else 1.0)
+    """The corner and diagonal of ``mesh``'s bounding box: the decimator's unit frame."""
+    return mesh.vertices.min(axis=0), (mesh.bounding_box_diagonal or 1.0)
 
 
-def _decimator_input(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
-    """The decimator's arrays: vertices in the unit frame (:func:`_frame`), as float32.
+def _decimator_input(mesh: Mesh,
+                     frame: tuple[np.ndarray, float]) -> tuple[np.ndarray, np.ndarray]:
+    """The decimator's arrays: vertices in the unit ``frame`` (:func:`_frame`), as float32.
 
     The decimator's error threshold is absolute (``1e-9 (t + 3)^agg`` at pass ``t``): a
     scan measured in micrometres or millimetres did not reach the target (a 97K-vertex
@@ -119,7 +118,7 @@ def _decimator_input(mesh: Mesh) -> tuple[np.ndarray, np.ndarray]:
     lost its detail to float32. In the unit frame the proxy is the same at every scale
     and place.
     """
-    lo, size = _frame(mesh)
+    lo, size = frame
     # writable copies: the wrapper refuses read-only arrays
     return (((mesh.vertices - lo) / size).astype(np.float32),
             np.array(mesh.faces, dtype=np.int64))
@@ -219,9 +218,9 @@ def start_decimation(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> bool
     with _cache_lock:
         if key in _cache or key in _pending:
             return False
-        job = _child_pool.submit(_simplify_in_child, *_decimator_input(mesh), n_target)
+        frame = _frame(mesh)
+        job = _child_pool.submit(_simplify_in_child, *_decimator_input(mesh, frame), n_target)
         _pending[key] = job
-    frame = _frame(mesh)
     # into the cache when done, whether or not anyone collects it (outside the lock: a job
     # already done runs the callback here and now)
     job.add_done_callback(lambda f: _keep(key, f, frame))
@@ -272,7 +271,8 @@ def decimate(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> Mesh:
         # the child falls back to this process itself: an error here is the decimator's own
         hit = _proxy_arrays(*running.result(), _frame(mesh))
     if hit is None:
-        hit = _proxy_arrays(*_simplify(*_decimator_input(mesh), n_target), _frame(mesh))
+        frame = _frame(mesh)
+        hit = _proxy_arrays(*_simplify(*_decimator_input(mesh, frame), n_target), frame)
         with _cache_lock:
             _store(key, hit)
     return Mesh(hit[0], hit[1], name=f"{mesh.name} proxy")
