@@ -133,6 +133,8 @@ def test_progress_without_a_terminal_is_plain_lines(monkeypatch):
             p(it, e, None)
     lines = err.getvalue().splitlines()
     assert "\r" not in err.getvalue() and len(lines) == 3
+    # the first iteration has nothing to compare with: its line says so by leaving it out
+    assert lines[0] == "arapkit: r = 2: iteration 1, energy 4"
     assert lines[1] == "arapkit: r = 2: iteration 2, energy 2, rel. decrease 5.00e-01"
 
 

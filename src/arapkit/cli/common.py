@@ -199,11 +199,11 @@ class Progress:
         self._prev: float | None = None
 
     def __call__(self, iteration: int, energy: float, vertices: Any) -> bool:
-        rel = float("nan")
+        status = f"energy {energy:.4g}"
         if self._prev is not None and self._prev != 0:
-            rel = (self._prev - energy) / abs(self._prev)
+            # the first iteration has nothing to compare with: no "nan" for a user to read
+            status += f", rel. decrease {(self._prev - energy) / abs(self._prev):.2e}"
         self._prev = energy
-        status = f"energy {energy:.4g}, rel. decrease {rel:.2e}"
         if self._bar is not None:
             self._bar.update(max(iteration - self._bar.n, 0))
             self._bar.set_postfix_str(status, refresh=False)
