@@ -51,6 +51,7 @@ __all__ = [
     "number",
     "parse_json",
     "port",
+    "positions_of",
     "quaternion",
     "read_input",
     "real_array",
@@ -354,11 +355,29 @@ def ring_sizes(rings: Any, n_vertices: int, source: str = "rings") -> np.ndarray
     return r.astype(np.int32)
 
 
+def positions_of(value: Any) -> Any:
+    """What stands for vertex positions: ``value.vertices`` when ``value`` carries them
+    (an :class:`arapkit.Mesh`, a ``trimesh.Trimesh``, a solve's :class:`arapkit.Result`),
+    else ``value`` itself, to be checked as an array.
+
+    Examples
+    --------
+    >>> class Shape:
+    ...     vertices = [[0.0, 1.0, 2.0]]
+    >>> positions_of(Shape())
+    [[0.0, 1.0, 2.0]]
+    >>> positions_of([[3.0, 4.0, 5.0]])
+    [[3.0, 4.0, 5.0]]
+    """
+    return value if isinstance(value, np.ndarray) else getattr(value, "vertices", value)
+
+
 def handle_indices(handles: Any, n_vertices: int, source: str = "handles") -> np.ndarray:
     """Handle vertex indices as a 1-D int64 array: integers, unique, in ``0..n-1``.
 
     A boolean array of length ``n`` is a mask and selects its True vertices; booleans of
-    any other length, 2-D shapes, fractions and text are refused.
+    any other length, 2-D shapes, fractions and text are refused. A handle set read by
+    :func:`arapkit.load_handles` (anything with ``indices``) stands for its indices.
 
     Examples
     --------
@@ -367,6 +386,8 @@ def handle_indices(handles: Any, n_vertices: int, source: str = "handles") -> np
     >>> handle_indices(np.array([True, False, True]), 3).tolist()
     [0, 2]
     """
+    if not isinstance(handles, np.ndarray):
+        handles = getattr(handles, "indices", handles)
     if isinstance(handles, (str, bytes)):
         raise InputError(f"{source}: handle indices must be integers, got {_show(handles)}")
     h = real_array(handles, source, dtype=None)
@@ -407,7 +428,12 @@ def target_positions(handles: np.ndarray, targets: Any, name: str = "targets") -
     --------
     >>> target_positions(np.array([4]), [[0, 1, 2]]).tolist()
     [[0.0, 1.0, 2.0]]
+
+    A handle set read by :func:`arapkit.load_handles` (anything with ``targets``) stands
+    for its targets.
     """
+    if not isinstance(targets, np.ndarray):
+        targets = getattr(targets, "targets", targets)
     T = real_array(targets, name)
     if T.shape != (len(handles), 3):
         raise InputError(f"{name}: expected shape ({len(handles)}, 3), got {T.shape}")

@@ -119,9 +119,11 @@ class ARAPProblem:
         >>> p.n_vertices, p.energy.name
         (1154, 'rring')
         """
+        from ..mesh.model import as_mesh
         from ..mesh.weights import DEFAULT_WEIGHTS, edge_weights
 
         t0 = time.perf_counter()
+        mesh = as_mesh(mesh)
         kind = DEFAULT_WEIGHTS if weights is None else weights
         w = edge_weights(mesh, kind)
         if not isinstance(kind, str):  # explicit per-edge weights: no kind to name

@@ -42,7 +42,7 @@ from ..mesh.selection import (
     select_sphere,
     short_name,
 )
-from ..validate import parse_json, read_input
+from ..validate import parse_json, positions_of, read_input
 from .atomic import write_json
 from .seldef import load_def, load_sel
 
@@ -226,8 +226,9 @@ def parse_handles(
     ----------
     data : list of dict, or {"groups": list}
         Parsed JSON (see the README section "Handle files" for the schema).
-    vertices : (n, 3) array_like
-        Rest positions; selections and rotations use them.
+    vertices : (n, 3) array_like, or a mesh
+        Rest positions (a Mesh or a trimesh stands for its vertices); selections and
+        rotations use them.
     source : str
         Name used in error messages (normally the file name).
     welded : Mesh, optional
@@ -269,7 +270,7 @@ def parse_handles(
     >>> [g.indices.tolist() for g in hs.groups]
     [[0, 1], [3]]
     """
-    V = np.asarray(vertices, dtype=np.float64)
+    V = np.asarray(positions_of(vertices), dtype=np.float64)
     space = _Space(V, welded, source)
     groups: list[HandleGroup] = []
     names: dict[str, int] = {}
@@ -371,8 +372,8 @@ def load_handles(
     ----------
     path : path
         ``*.json`` handle groups, or ``*.sel`` per-vertex status.
-    vertices : (n, 3) array_like
-        Rest positions.
+    vertices : (n, 3) array_like, or a mesh
+        Rest positions (a Mesh or a trimesh stands for its vertices).
     transform : path, optional
         ``.def`` 4x4 matrix for a ``.sel`` file; defaults to the ``.def`` next to it.
     welded : Mesh, optional

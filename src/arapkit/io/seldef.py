@@ -22,6 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..mesh.selection import HandleContext, HandleGroup, HandleSet, check_target_reach
+from ..validate import positions_of
 from .atomic import atomic_write
 from .text import int_tokens, text_tokens
 
@@ -89,7 +90,7 @@ def load_sel(
     (['fixed', 'handle'], [0.0, 0.0, 1.0])
     """
     path = Path(path)
-    V = np.asarray(vertices, dtype=np.float64)
+    V = np.asarray(positions_of(vertices), dtype=np.float64)
     # any other code is a typo or another format: refused, not silently "free"
     status = np.array(int_tokens(path, "status", ".sel files", len(V), range(3)), dtype=np.int8)
     if len(status) != len(V):

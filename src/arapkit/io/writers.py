@@ -37,6 +37,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..mesh.attributes import MeshAttributes, recompute_normals
+from ..validate import positions_of
 from .atomic import atomic_write
 from .formats import mesh_format
 
@@ -336,7 +337,9 @@ def save_mesh(
     ----------
     path : path
         ``.ply``, ``.obj``, ``.off``, ``.stl`` or ``.glb``, optionally followed by ``.gz``.
-    vertices : (n, 3) float
+    vertices : (n, 3) float, or a mesh or a solve's result
+        The positions; a :class:`~arapkit.Mesh` or a ``trimesh.Trimesh`` is written whole
+        (``save_mesh(path, mesh)``), a :class:`~arapkit.Result` stands for its vertices.
     faces : (m, 3) int, optional
         Triangles; not needed (and not used) when ``like`` is given.
     vertex_properties : dict of name -> (n,) array, optional
@@ -366,7 +369,13 @@ def save_mesh(
     'OFF'
     """
     fmt, gz = mesh_format(path)
-    V = np.ascontiguousarray(vertices, dtype=np.float64).reshape(-1, 3)
+    if faces is None and like is None and getattr(vertices, "faces", None) is not None:
+        # save_mesh(path, mesh): a Mesh writes what its file carried, a trimesh its faces
+        if hasattr(vertices, "attributes"):
+            like = vertices
+        else:
+            faces = vertices.faces
+    V = np.ascontiguousarray(positions_of(vertices), dtype=np.float64).reshape(-1, 3)
     # no file with a NaN or infinite coordinate ever leaves the library
     bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
     if len(bad):

@@ -39,7 +39,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from ..mesh.model import Mesh
+from ..mesh.model import Mesh, as_mesh
 from ..mesh.weights import DEFAULT_WEIGHTS, edge_weights
 from .energies import (
     EXAMPLE_BYTES,
@@ -125,6 +125,7 @@ def learn_rings(
     t0 = time.perf_counter()
     r_min, r_max = check_ring_range(r_min, r_max)
     resolve_omega(omega, np.zeros((1, 1)))  # reject a bad omega before the work
+    reference = as_mesh(reference, "reference")
     P = as_examples(reference, examples)
     identical = identical_examples(reference, P)
     timings: dict = {}

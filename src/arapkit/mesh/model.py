@@ -9,6 +9,7 @@ what it can while saying so in :attr:`Mesh.notes`, and raises
 from __future__ import annotations
 
 import math
+import os
 from functools import cached_property
 
 import numba as nb
@@ -24,6 +25,7 @@ __all__ = [
     "COORDINATE_RANGE",
     "EdgeTopology",
     "Mesh",
+    "as_mesh",
     "bounding_box_diagonal",
     "check_number_range",
     "extent",
@@ -598,3 +600,39 @@ class Mesh(EdgeTopology):
 
     def __repr__(self) -> str:
         return f"Mesh({self.name!r}, {self.n_vertices} vertices, {self.n_faces} faces)"
+
+
+def as_mesh(value, what: str = "mesh") -> Mesh:
+    """``value`` as a :class:`Mesh`: a Mesh itself, a ``(vertices, faces)`` pair, or a
+    mesh object of another library that has ``vertices`` and ``faces`` (``trimesh.Trimesh``).
+
+    The doors that take a mesh (:class:`arapkit.Deformer`, :class:`arapkit.LaplacianEditor`,
+    the torch layer) call this, so a trimesh or libigl user passes what they have, and
+    anything else gets a one-line :class:`~arapkit.errors.InputError` naming ``what``
+    instead of an ``AttributeError`` from deep inside.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> as_mesh((np.eye(3), [[0, 1, 2]])).n_faces
+    1
+    >>> class Other:  # e.g. a trimesh.Trimesh
+    ...     vertices, faces = np.eye(3), np.array([[0, 1, 2]])
+    >>> as_mesh(Other()).n_vertices
+    3
+    >>> as_mesh("bunny.off")  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: mesh: expected an arapkit.Mesh, ... got str (load a file ...)
+    """
+    if isinstance(value, Mesh):
+        return value
+    if isinstance(value, (tuple, list)) and len(value) == 2:
+        return Mesh(value[0], value[1], name=what)
+    V, F = getattr(value, "vertices", None), getattr(value, "faces", None)
+    if V is not None and F is not None:
+        return Mesh(np.asarray(V), np.asarray(F), name=what)
+    hint = " (load a file with arapkit.load_mesh)" if isinstance(value, (str, os.PathLike)) else ""
+    raise InputError(f"{what}: expected an arapkit.Mesh, a (vertices, faces) pair or a mesh "
+                     f"with vertices and faces (trimesh.Trimesh), got {type(value).__name__}"
+                     + hint)

@@ -34,6 +34,7 @@ import dataclasses
 import numpy as np
 
 from ..errors import InputError
+from ..validate import positions_of
 from .model import bounding_box_diagonal
 
 __all__ = [
@@ -93,7 +94,7 @@ def bounding_box(vertices: np.ndarray) -> BoundingBox:
     >>> bounding_box(np.array([[1.0, 0, -1], [2, 5, 1]])).max.tolist()
     [2.0, 5.0, 1.0]
     """
-    V = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    V = np.asarray(positions_of(vertices), dtype=np.float64).reshape(-1, 3)
     if len(V) == 0:
         z = np.zeros(3)
         return BoundingBox(z, z.copy())
@@ -152,7 +153,7 @@ def guess_up(vertices: np.ndarray) -> UpGuess:
     >>> g.axis, g.confidence < 0.5                   # so the taller side decides: low confidence
     ('+y', True)
     """
-    V = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    V = np.asarray(positions_of(vertices), dtype=np.float64).reshape(-1, 3)
     if len(V) < 4:
         return UpGuess("+z", 0.0, "too few vertices: +z by convention")
     s = {"+y": _support(V, 1), "+z": _support(V, 2)}

@@ -21,6 +21,7 @@ import numba as nb
 import numpy as np
 
 from ..errors import InputError
+from ..validate import positions_of
 from .model import COORDINATE_RANGE, extent, kernel_input
 
 __all__ = [
@@ -166,7 +167,7 @@ def select_box(vertices: np.ndarray, lo: Sequence[float], hi: Sequence[float]) -
     >>> select_box(np.array([[0.0, 0, 0], [2, 0, 0]]), [-1, -1, -1], [1, 1, 1]).tolist()
     [0]
     """
-    V = np.asarray(vertices, dtype=np.float64)
+    V = np.asarray(positions_of(vertices), dtype=np.float64)
     inside = np.all((V >= np.asarray(lo, float)) & (V <= np.asarray(hi, float)), axis=1)
     return np.flatnonzero(inside).astype(np.int64)
 
@@ -180,7 +181,7 @@ def select_sphere(vertices: np.ndarray, center: Sequence[float], radius: float) 
     >>> select_sphere(np.array([[0.0, 0, 0], [2, 0, 0]]), [2, 0, 0], 0.5).tolist()
     [1]
     """
-    V = np.asarray(vertices, dtype=np.float64)
+    V = np.asarray(positions_of(vertices), dtype=np.float64)
     with np.errstate(over="ignore"):  # numpy squares go to inf; Python's float ** raises
         d2 = np.sum((V - np.asarray(center, float)) ** 2, axis=1)
         r2 = np.float64(radius) ** 2
@@ -199,7 +200,7 @@ def select_nearest(vertices: np.ndarray, point: Sequence[float], k: int) -> np.n
     >>> select_nearest(V, [0.9, 0, 0], 2).tolist()
     [0, 1]
     """
-    V = np.asarray(vertices, dtype=np.float64)
+    V = np.asarray(positions_of(vertices), dtype=np.float64)
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or not 1 <= k <= len(V):
         raise InputError(f"select_nearest: k must be an integer in 1..{len(V)}, got {k!r}")
     P = np.asarray(point, dtype=np.float64)

@@ -44,7 +44,7 @@ from ..arap.loop import Result, local_global
 from ..arap.problem import ARAPProblem
 from ..arap.rings import Neighbourhoods, check_rings
 from ..errors import Advice, InputError
-from ..mesh.model import Mesh
+from ..mesh.model import Mesh, as_mesh
 from ..mesh.weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
 from ..validate import integer, iteration_cap, real_array, tolerance
 from .registry import INTERFACES, MethodInfo, MethodOption, method, method_names, methods, register
@@ -185,9 +185,11 @@ class Deformer:
 
     Parameters
     ----------
-    mesh : Mesh
-    handles : (h,) int
-        Vertices with positional constraints.
+    mesh : Mesh, a (vertices, faces) pair, or a trimesh.Trimesh
+        The surface (:func:`arapkit.mesh.model.as_mesh`).
+    handles : (h,) int, (n,) bool, or a HandleSet
+        Vertices with positional constraints (a mask selects its True vertices; a
+        :func:`arapkit.load_handles` set stands for its indices).
     rings : int or (n,) int
         Neighbourhood size r per vertex (1 = standard ARAP; larger = stiffer). Only for
         ``energy="rring"``.
@@ -275,6 +277,7 @@ class Deformer:
                 volumetric: bool = False, density: float | None = None,
                 multires: bool | None = None, proxy_vertices: int | None = None,
                 levels=None, **options):
+        mesh = as_mesh(mesh)
         if not volumetric:
             if density is not None:
                 raise InputError("density is an option of volumetric=True")
@@ -287,7 +290,10 @@ class Deformer:
             for name, value in (("proxy_vertices", proxy_vertices), ("levels", levels)):
                 if value is not None:
                     raise InputError(f"{name} is an option of multires=True")
-            return super().__new__(cls)
+            obj = super().__new__(cls)
+            # __init__ receives the caller's mesh again: a trimesh is converted once, here
+            obj._checked_mesh = mesh
+            return obj
         if multires:
             raise InputError("multires=True is for surfaces; volumetric=True solves the "
                              "volume directly")
@@ -329,6 +335,7 @@ class Deformer:
         self.device = check_device(device)
         options = check_method(energy, sr_alpha, nodes, sr_roi)
         info = method(energy)
+        mesh = self.__dict__.pop("_checked_mesh", None) or as_mesh(mesh)
         self.mesh = mesh
         self.energy = energy
         self.weights_kind = weights
@@ -550,8 +557,9 @@ class Deformer:
 
         Parameters
         ----------
-        targets : (h, 3)
-            Positions of the handles, in the order of ``handles``.
+        targets : (h, 3), or a HandleSet
+            Positions of the handles, in the order of ``handles`` (a
+            :func:`arapkit.load_handles` set stands for its targets).
         init : None, "identity", "laplacian" or (n, 3) array
             Starting point; an array is a warm start (e.g. the previous result).
         tol, max_iter : optional overrides of the constructor's values.

@@ -17,7 +17,7 @@ import scipy.sparse as sp
 
 from ..arap.constraints import Elimination, anchor_components, check_handles, check_targets
 from ..errors import InputError
-from ..mesh.model import Mesh
+from ..mesh.model import Mesh, as_mesh
 from ..mesh.weights import DEFAULT_WEIGHTS, edge_weights, voronoi_areas
 from .registry import MethodInfo, register
 
@@ -80,7 +80,7 @@ class LaplacianEditor:
 
     def __init__(self, mesh: Mesh, handles, weights: str = DEFAULT_WEIGHTS,
                  omega: float | None = None) -> None:
-        self.mesh = mesh
+        self.mesh = mesh = as_mesh(mesh)
         self.handles = check_handles(mesh, handles)
         if omega is not None and not (np.isfinite(omega) and omega > 0):
             raise InputError(f"omega must be a positive number, got {omega}")

@@ -13,7 +13,7 @@ import numpy as np
 from ...arap.constraints import check_handles
 from ...arap.rings import check_rings
 from ...errors import InputError
-from ...mesh.model import Mesh
+from ...mesh.model import Mesh, as_mesh
 from ..deformer import Deformer, Result, register_variant
 from .graph import DEFAULT_VOLUME_WEIGHTS, volume_graph, volume_rings
 from .tets import DEFAULT_DENSITY, TetMesh, check_closed, save_volume, tetrahedralise
@@ -66,7 +66,7 @@ class VolumetricDeformer:
     def __init__(self, mesh: Mesh, handles, rings=1, *, density: float = DEFAULT_DENSITY,
                  weights: str = DEFAULT_VOLUME_WEIGHTS, tet: TetMesh | None = None,
                  **options) -> None:
-        self.mesh = mesh
+        self.mesh = mesh = as_mesh(mesh)
         handles = check_handles(mesh, handles)
         if tet is None:
             tet = tetrahedralise(mesh, density)  # refuses surfaces that bound no volume
