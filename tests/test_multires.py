@@ -235,6 +235,15 @@ def test_rigid_motions_match_scipys_kabsch():
         assert np.abs(R[g] - ref).max() < 1e-9
         assert np.abs(t[g] - (cd - ref @ cs)).max() < 1e-9
     assert np.array_equal(R[4], np.eye(3)) and np.array_equal(t[4], np.zeros(3))
+    # far from the origin (a georeferenced scan) the same motions, moved: the sums are
+    # taken around each group's means, where uncentred ones cancel to noise
+    far = np.array([5e5, 5e6, 100.0])
+    R2, t2 = rigid_motions(src + far, dst + far, groups, 5)
+    assert np.abs(R2[:3] - R[:3]).max() < 1e-8
+    fit = groups < 3
+    moved = np.einsum("vij,vj->vi", R2[groups], src + far) + t2[groups] - far
+    near = np.einsum("vij,vj->vi", R[groups], src) + t[groups]
+    assert np.abs(moved - near)[fit].max() < 1e-6
 
 
 def test_small_meshes_are_their_own_proxy():

@@ -427,3 +427,40 @@ def test_only_triangle_energies_keep_the_permuted_triangles():
         p = ARAPProblem.from_mesh(m, h, energy=energy)
         np.testing.assert_array_equal(p.perm[p.graph.faces], m.faces)
         np.testing.assert_array_equal(p.graph.face_edges, m.face_edges)
+
+
+def test_many_followers_each_take_their_anchors_kabsch_motion():
+    """A scan's floating specks: every component without a handle is placed by the best
+    rigid motion of its own anchors (checked one by one against scipy's Kabsch), rotations
+    included, and the compiled pass leaves every other vertex alone."""
+    from scipy.spatial.transform import Rotation
+
+    from arapkit.arap.constraints import Followers
+
+    a = bar(length=2.0, segments=(10, 2, 2))
+    rng = np.random.default_rng(3)
+    k = 60
+    centres = a.vertices[rng.integers(0, a.n_vertices, k)] + rng.normal(0, 0.05, (k, 3))
+    specks = (centres[:, None] + rng.normal(0, 0.02, (k, 3, 3))).reshape(-1, 3)
+    V = np.vstack([a.vertices, specks])
+    F = np.vstack([a.faces, a.n_vertices + np.arange(3 * k).reshape(-1, 3)])
+    m = Mesh(V, F, name="specks")
+    free = np.arange(a.n_vertices, len(V))
+    f = Followers.of(m, free)
+    P = V.copy()
+    x = V[: a.n_vertices, 0]  # a smooth bend of the bar: each speck's anchors disagree a bit
+    P[: a.n_vertices, 1] += 0.3 * x**2
+    P[: a.n_vertices, 2] += 0.1 * np.sin(3 * x)
+    R = np.tile(np.eye(3), (len(V), 1, 1))
+    before = P[: a.n_vertices].copy()
+    f.apply(P, R)
+    assert np.array_equal(P[: a.n_vertices], before)
+    assert int(f.group.max()) + 1 == k
+    for g in range(k):
+        anchors = f.anchors[f.anchor_group == g]
+        src, dst = V[anchors], P[anchors]
+        rot = Rotation.align_vectors(dst - dst.mean(0), src - src.mean(0))[0].as_matrix()
+        mine = f.vertices[f.group == g]
+        want = (V[mine] - src.mean(0)) @ rot.T + dst.mean(0)
+        assert np.abs(P[mine] - want).max() < 1e-9, g
+        assert np.abs(R[mine] - rot).max() < 1e-9, g
