@@ -19,7 +19,7 @@ from arapkit import Deformer, InputError, Mesh
 from arapkit.arap.constraints import rigid_motions
 from arapkit.mesh.shapes import bar, bar_bend
 from arapkit.methods.deformer import MULTIRES_AUTO_VERTICES, coarse_to_fine
-from arapkit.methods.multires import MultiresDeformer, decimate, level_sizes
+from arapkit.methods.multires import MultiresDeformer, decimate, level_sizes, specks
 
 
 @pytest.fixture(scope="module")
@@ -599,3 +599,55 @@ def test_checked_targets_are_checked_once_and_cannot_change(big, monkeypatch):
     mine[0, 0] = np.nan
     with pytest.raises(InputError, match="handle 0"):
         d.preview(mine, max_iter=1)
+
+
+@pytest.fixture(scope="module")
+def specked():
+    """A bar with 400 floating specks (single triangles) round it, as scans have."""
+    b = bar(segments=(60, 8, 8))
+    rng = np.random.default_rng(2)
+    k, diag = 400, b.bounding_box_diagonal
+    centres = b.vertices[rng.integers(0, b.n_vertices, k)] + rng.normal(0, 0.01 * diag, (k, 3))
+    corners = centres[:, None] + rng.normal(0, 0.002 * diag, (k, 3, 3))
+    V = np.vstack([b.vertices, corners.reshape(-1, 3)])
+    F = np.vstack([b.faces, b.n_vertices + np.arange(3 * k).reshape(-1, 3)])
+    return b, Mesh(V, F, name="specked")
+
+
+def test_specks_are_left_out_of_the_proxy(specked):
+    b, m = specked
+    assert np.array_equal(np.flatnonzero(specks(m, 300)), np.arange(b.n_vertices, m.n_vertices))
+    clean, proxy = decimate(b, 300), decimate(m, 300)
+    # the decimator does not collapse an isolated triangle: left in, the 400 specks would
+    # add 1,200 vertices to a 300-vertex proxy
+    assert abs(proxy.n_vertices - clean.n_vertices) <= 0.1 * clean.n_vertices
+    assert specks(b, 300) is None and specks(m, m.n_vertices) is None
+    # an unwelded soup (every face a part) is decimated whole
+    soup = Mesh(m.vertices[m.faces].reshape(-1, 3), np.arange(3 * m.n_faces).reshape(-1, 3))
+    assert specks(soup, 300) is None
+
+
+def test_specks_follow_the_preview_and_a_speck_handle_pins_nothing(specked):
+    b, m = specked
+    nb = b.n_vertices
+    diag = _diag(m)
+    h, t = bar_bend(b, 90)
+    d = MultiresDeformer(m, h, proxy_vertices=300)
+    p, res = d.preview(t), d.solve(t)
+    # the specks ride on the proxy's nearest vertex while dragging, close to where the
+    # exact solve puts them (anchors' rigid motion); left at rest they would be 0.3 off
+    assert np.abs(p.vertices[nb:] - res.vertices[nb:]).max() < 0.05 * diag
+    assert np.abs(res.vertices[nb:] - m.vertices[nb:]).max() > 0.2 * diag
+    # a speck dragged alone: in the exact solve only it moves, and the preview must not
+    # pull the nearest proxy vertex of the bar along with it
+    fixed = np.flatnonzero(b.vertices[:, 0] <= b.vertices[:, 0].min() + 1e-9)
+    far = nb + 3 * int(np.argmax(m.vertices[nb::3, 0]))
+    speck = np.arange(far, far + 3)
+    hs = np.concatenate([fixed, speck])
+    T = m.vertices[hs].copy()
+    T[-3:] += [0.0, 0.2 * diag, 0.0]
+    d = MultiresDeformer(m, hs, proxy_vertices=300)
+    p, res = d.preview(T), d.solve(T)
+    assert np.abs(res.vertices[:nb] - b.vertices).max() < 1e-9 * diag
+    assert np.abs(p.vertices[:nb] - b.vertices).max() < 1e-9 * diag
+    assert np.abs(p.vertices[speck] - T[-3:]).max() < 1e-12 * diag
