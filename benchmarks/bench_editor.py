@@ -46,6 +46,9 @@ Usage for the scan::
         --rings 1 --steps 20 --rate 20 --modes paced
     python benchmarks/bench_editor.py --mesh ../shared/data/meshes/dragon_vrip.ply.gz \
         --subdivide 1 --rings 1 --steps 20 --rate 20 --modes paced
+
+``--specks N`` adds N single triangles floating round the surface first (a photogrammetry
+scan's floaters; the drag is laid out on the mesh without them).
 """
 
 from __future__ import annotations
