@@ -484,7 +484,7 @@ def test_decimating_in_a_child_process_gives_the_same_proxy(big):
     import arapkit.methods.multires as mr
 
     mesh = big[0]
-    V, F = mr._decimator_input(mesh, mr._frame(mesh))
+    V, F = mr._decimator_input(mesh, mr._frame(mesh), 5_000)
     here = mr._simplify(V, F, 5_000)
     child = mr._run_child(V, F, 5_000)  # raises if the child fails: no silent fallback
     for a, b in zip(here, child):
