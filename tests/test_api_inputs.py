@@ -36,10 +36,20 @@ def _trimesh(mesh):
     return trimesh.Trimesh(mesh.vertices, mesh.faces, process=False)
 
 
-@pytest.mark.parametrize("kind", ["trimesh", "pair", "list"])
+class _Open3DLike:
+    """What Open3D's ``TriangleMesh`` offers: ``vertices`` and ``triangles``, as sequences
+    that ``np.asarray`` reads (open3d itself is not a test dependency)."""
+
+    def __init__(self, mesh):
+        self.vertices = [tuple(v) for v in mesh.vertices]
+        self.triangles = [tuple(f) for f in mesh.faces]
+
+
+@pytest.mark.parametrize("kind", ["trimesh", "open3d", "pair", "list"])
 def test_deformer_takes_a_trimesh_or_a_vertices_faces_pair(cactus, kind):
     mesh, hs, ref = cactus
-    given = {"trimesh": _trimesh(mesh), "pair": (mesh.vertices, mesh.faces),
+    given = {"trimesh": _trimesh(mesh), "open3d": _Open3DLike(mesh),
+             "pair": (mesh.vertices, mesh.faces),
              "list": [mesh.vertices.tolist(), mesh.faces.tolist()]}[kind]
     res = arapkit.Deformer(given, hs.indices).solve(hs.targets)
     assert res.iterations == ref.iterations

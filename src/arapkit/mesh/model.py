@@ -604,7 +604,8 @@ class Mesh(EdgeTopology):
 
 def as_mesh(value, what: str = "mesh") -> Mesh:
     """``value`` as a :class:`Mesh`: a Mesh itself, a ``(vertices, faces)`` pair, or a
-    mesh object of another library that has ``vertices`` and ``faces`` (``trimesh.Trimesh``).
+    mesh object of another library that has ``vertices`` and ``faces`` (``trimesh.Trimesh``)
+    or ``triangles`` (Open3D's ``TriangleMesh``).
 
     The doors that take a mesh (:class:`arapkit.Deformer`, :class:`arapkit.LaplacianEditor`,
     the torch layer) call this, so a trimesh or libigl user passes what they have, and
@@ -629,7 +630,10 @@ def as_mesh(value, what: str = "mesh") -> Mesh:
         return value
     if isinstance(value, (tuple, list)) and len(value) == 2:
         return Mesh(value[0], value[1], name=what)
+    # trimesh calls them faces, Open3D's TriangleMesh triangles
     V, F = getattr(value, "vertices", None), getattr(value, "faces", None)
+    if F is None:
+        F = getattr(value, "triangles", None)
     if V is not None and F is not None:
         return Mesh(np.asarray(V), np.asarray(F), name=what)
     hint = " (load a file with arapkit.load_mesh)" if isinstance(value, (str, os.PathLike)) else ""
