@@ -129,6 +129,9 @@ def test_save_mesh_takes_a_mesh_a_trimesh_or_a_result(cactus, tmp_path):
                                                           process=False))
     c = arapkit.load_mesh(tmp_path / "c.obj")
     assert np.array_equal(c.vertices, ref.vertices) and np.array_equal(c.faces, mesh.faces)
+    arapkit.save_mesh(tmp_path / "d.off", _Open3DLike(mesh))
+    d = arapkit.load_mesh(tmp_path / "d.off")
+    assert np.array_equal(d.vertices, mesh.vertices) and np.array_equal(d.faces, mesh.faces)
 
 
 @pytest.mark.parametrize("given, says", [

@@ -37,6 +37,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..mesh.attributes import MeshAttributes, recompute_normals
+from ..mesh.model import Mesh, faces_of
 from ..validate import positions_of
 from .atomic import atomic_write
 from .formats import mesh_format
@@ -369,12 +370,13 @@ def save_mesh(
     'OFF'
     """
     fmt, gz = mesh_format(path)
-    if faces is None and like is None and getattr(vertices, "faces", None) is not None:
-        # save_mesh(path, mesh): a Mesh writes what its file carried, a trimesh its faces
-        if hasattr(vertices, "attributes"):
+    if faces is None and like is None:
+        # save_mesh(path, mesh): a Mesh writes what its file carried, another library's
+        # mesh its triangles
+        if isinstance(vertices, Mesh):
             like = vertices
         else:
-            faces = vertices.faces
+            faces = faces_of(vertices)
     V = np.ascontiguousarray(positions_of(vertices), dtype=np.float64).reshape(-1, 3)
     # no file with a NaN or infinite coordinate ever leaves the library
     bad = np.flatnonzero(~np.isfinite(V).all(axis=1))

@@ -26,6 +26,7 @@ __all__ = [
     "EdgeTopology",
     "Mesh",
     "as_mesh",
+    "faces_of",
     "bounding_box_diagonal",
     "check_number_range",
     "extent",
@@ -602,6 +603,21 @@ class Mesh(EdgeTopology):
         return f"Mesh({self.name!r}, {self.n_vertices} vertices, {self.n_faces} faces)"
 
 
+def faces_of(value) -> object | None:
+    """A mesh object's triangles: ``faces`` (arapkit, trimesh) or ``triangles`` (Open3D's
+    ``TriangleMesh``); None for anything else (an array, a result).
+
+    Examples
+    --------
+    >>> class Open3DLike:
+    ...     triangles = [[0, 1, 2]]
+    >>> faces_of(Open3DLike()), faces_of(np.eye(3))
+    ([[0, 1, 2]], None)
+    """
+    faces = getattr(value, "faces", None)
+    return getattr(value, "triangles", None) if faces is None else faces
+
+
 def as_mesh(value, what: str = "mesh") -> Mesh:
     """``value`` as a :class:`Mesh`: a Mesh itself, a ``(vertices, faces)`` pair, or a
     mesh object of another library that has ``vertices`` and ``faces`` (``trimesh.Trimesh``)
@@ -630,10 +646,7 @@ def as_mesh(value, what: str = "mesh") -> Mesh:
         return value
     if isinstance(value, (tuple, list)) and len(value) == 2:
         return Mesh(value[0], value[1], name=what)
-    # trimesh calls them faces, Open3D's TriangleMesh triangles
-    V, F = getattr(value, "vertices", None), getattr(value, "faces", None)
-    if F is None:
-        F = getattr(value, "triangles", None)
+    V, F = getattr(value, "vertices", None), faces_of(value)
     if V is not None and F is not None:
         return Mesh(np.asarray(V), np.asarray(F), name=what)
     hint = " (load a file with arapkit.load_mesh)" if isinstance(value, (str, os.PathLike)) else ""
