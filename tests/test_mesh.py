@@ -146,3 +146,27 @@ def test_a_face_that_is_no_polygon_is_refused_in_one_line(faces):
     was a TypeError traceback."""
     with pytest.raises(InputError, match=r"face \d+ is not a list of vertex indices"):
         Mesh(np.zeros((3, 3)), faces)
+
+
+@pytest.mark.parametrize("seed", [0, 1, 2])
+def test_component_labels_are_scipys(seed):
+    """The compiled union-find labels the components exactly as SciPy's
+    ``connected_components`` does (numbered by their lowest vertex), on graphs of many
+    parts, vertices in no face among them, and on an EdgeGraph."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    from arapkit.arap.graph import EdgeGraph
+
+    rng = np.random.default_rng(seed)
+    n = 3000
+    F = rng.integers(0, n, (900, 3))  # sparse: hundreds of parts, and unused vertices
+    F = F[(F[:, 0] != F[:, 1]) & (F[:, 1] != F[:, 2]) & (F[:, 0] != F[:, 2])]
+    m = Mesh(rng.normal(size=(n, 3)), F)
+    E = m.edges
+    A = coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
+    k, want = connected_components(A, directed=False)
+    assert 100 < k < n and m.n_components == k
+    assert np.array_equal(m.component_labels, want)
+    g = EdgeGraph.from_mesh(m)
+    assert g.n_components == k and np.array_equal(g.component_labels, want)

@@ -16,7 +16,7 @@ from conftest import data_path
 from scipy.spatial.transform import Rotation
 
 from arapkit import Deformer, InputError, Mesh
-from arapkit.arap.constraints import rigid_motions
+from arapkit.arap.constraints import Followers, rigid_motion, rigid_motions
 from arapkit.mesh.shapes import bar, bar_bend
 from arapkit.methods.deformer import MULTIRES_AUTO_VERTICES, coarse_to_fine
 from arapkit.methods.multires import MultiresDeformer, decimate, level_sizes, specks
@@ -638,16 +638,51 @@ def test_specks_follow_the_preview_and_a_speck_handle_pins_nothing(specked):
     # exact solve puts them (anchors' rigid motion); left at rest they would be 0.3 off
     assert np.abs(p.vertices[nb:] - res.vertices[nb:]).max() < 0.05 * diag
     assert np.abs(res.vertices[nb:] - m.vertices[nb:]).max() > 0.2 * diag
+    # ... placed by the exact solve's own rule, the rigid fit to their anchors, on the
+    # preview's shape (skinned with one proxy vertex's rotation, they were not)
+    X = p.vertices.copy()
+    Followers.of(m, np.arange(nb, m.n_vertices)).apply(X)
+    assert np.abs(X - p.vertices).max() < 1e-12 * diag
+    # held at rest where the exact solve holds them
+    fix = MultiresDeformer(m, h, proxy_vertices=300, free_components="fix")
+    for shape in (fix.preview(t).vertices, fix.solve(t).vertices):
+        assert np.array_equal(shape[nb:], m.vertices[nb:])
     # a speck dragged alone: in the exact solve only it moves, and the preview must not
-    # pull the nearest proxy vertex of the bar along with it
+    # pull the nearest proxy vertex of the bar along with it (nor keep the old handles'
+    # rule for the specks)
     fixed = np.flatnonzero(b.vertices[:, 0] <= b.vertices[:, 0].min() + 1e-9)
     far = nb + 3 * int(np.argmax(m.vertices[nb::3, 0]))
     speck = np.arange(far, far + 3)
     hs = np.concatenate([fixed, speck])
     T = m.vertices[hs].copy()
     T[-3:] += [0.0, 0.2 * diag, 0.0]
-    d = MultiresDeformer(m, hs, proxy_vertices=300)
+    d.set_handles(hs)
     p, res = d.preview(T), d.solve(T)
     assert np.abs(res.vertices[:nb] - b.vertices).max() < 1e-9 * diag
     assert np.abs(p.vertices[:nb] - b.vertices).max() < 1e-9 * diag
     assert np.abs(p.vertices[speck] - T[-3:]).max() < 1e-12 * diag
+
+
+def test_a_speck_with_a_handle_moves_rigidly_with_it_in_the_preview(specked):
+    """A piece of debris partly inside a dragged region: the exact solve moves it rigidly
+    with its handled vertices, and so must the preview (skinned with one proxy vertex,
+    its free end swung 0.1 of the diagonal away)."""
+    b, m = specked
+    diag = _diag(m)
+    h, t = bar_bend(b, 90)
+    end = h[b.vertices[h, 0] > b.vertices[:, 0].mean()]
+    R, s = rigid_motion(b.vertices[end], t[np.isin(h, end)])
+    piece = bar(length=0.3 * diag, segments=(1, 1, 1))  # a box out past the bent end
+    P = piece.vertices + [b.vertices[:, 0].max() + 0.02 * diag, 0.05 * diag, 0.0]
+    n0 = m.n_vertices
+    mesh = Mesh(np.vstack([m.vertices, P]), np.vstack([m.faces, n0 + piece.faces]),
+                name="specked + piece")
+    near = n0 + np.flatnonzero(piece.vertices[:, 0] <= piece.vertices[:, 0].min() + 1e-9)
+    hs = np.concatenate([h, near])
+    T = np.vstack([t, mesh.vertices[near] @ R.T + s])
+    d = MultiresDeformer(mesh, hs, proxy_vertices=300)
+    assert not d.binding.covered[n0:].any()  # a speck: the proxy leaves it out
+    p, res = d.preview(T), d.solve(T, tol=1e-8, max_iter=3000)
+    rigid = mesh.vertices[n0:] @ R.T + s
+    assert np.abs(res.vertices[n0:] - rigid).max() < 1e-4 * diag
+    assert np.abs(p.vertices[n0:] - rigid).max() < 1e-12 * diag

@@ -464,3 +464,49 @@ def test_many_followers_each_take_their_anchors_kabsch_motion():
         want = (V[mine] - src.mean(0)) @ rot.T + dst.mean(0)
         assert np.abs(P[mine] - want).max() < 1e-9, g
         assert np.abs(R[mine] - rot).max() < 1e-9, g
+
+
+def test_followers_bind_each_part_to_its_nearest_anchors_by_brute_force():
+    """Who follows whom, against brute-force distances: each free part of two or more
+    vertices (parts of several sizes, their vertices scattered through the numbering)
+    follows the nearest anchored vertex of each of its vertices and the ``k`` nearest its
+    centroid; single free vertices follow nothing."""
+    from arapkit.arap.constraints import Followers
+
+    a = bar(length=2.0, segments=(6, 2, 2))
+    b = bar(length=0.5, segments=(2, 1, 1))
+    rng = np.random.default_rng(5)
+    parts_v = [a.vertices, b.vertices + [0.3, 0.6, 0.1]]
+    parts_f = [a.faces, b.faces]
+    for _ in range(30):  # single triangles about the bar
+        parts_v.append(a.vertices[rng.integers(a.n_vertices)] + rng.normal(0, 0.1, (3, 3)))
+        parts_f.append(np.array([[0, 1, 2]]))
+    parts_v.append(rng.normal(0, 0.5, (4, 3)))  # isolated vertices: in no face
+    offsets = np.cumsum([0] + [len(v) for v in parts_v])
+    V = np.vstack(parts_v)
+    F = np.vstack([f + o for f, o in zip(parts_f, offsets)])
+    perm = rng.permutation(len(V))  # the parts' vertices scattered through the numbering
+    where = np.empty_like(perm)
+    where[perm] = np.arange(len(V))
+    m = Mesh(V[perm], where[F], name="parts")
+    anchored = np.sort(where[: a.n_vertices])
+    free = np.setdiff1d(np.arange(len(V)), anchored)
+    k = 8
+    f = Followers.of(m, free, k=k)
+    labels = m.component_labels
+    followed = 0
+    for c in np.unique(labels[free]):
+        mine = np.flatnonzero(labels == c)
+        got = f.vertices[f.group == f.group[np.flatnonzero(f.vertices == mine[0])]] \
+            if mine[0] in f.vertices else np.zeros(0, int)
+        if len(mine) < 2:
+            assert len(got) == 0
+            continue
+        followed += 1
+        assert np.array_equal(got, mine)
+        g = f.group[np.flatnonzero(f.vertices == mine[0])[0]]
+        d = np.linalg.norm(m.vertices[mine][:, None] - m.vertices[anchored][None], axis=2)
+        dc = np.linalg.norm(m.vertices[anchored] - m.vertices[mine].mean(0), axis=1)
+        want = np.union1d(anchored[d.argmin(1)], anchored[np.argsort(dc)[:k]])
+        assert np.array_equal(f.anchors[f.anchor_group == g], want), c
+    assert followed == 31 and int(f.group.max()) + 1 == followed

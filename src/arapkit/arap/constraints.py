@@ -196,28 +196,34 @@ class Followers:
         is_free = np.zeros(len(V), dtype=bool)
         is_free[free] = True
         anchored = np.flatnonzero(~is_free)
-        members, anchors = [], []
-        if len(anchored):
-            tree = cKDTree(V[anchored])
-            comps = np.unique(labels[free])
-            order = np.argsort(labels, kind="stable")
-            starts = np.searchsorted(labels[order], comps)
-            sizes = np.bincount(labels)[comps]
-            for start, size in zip(starts, sizes):
-                mine = order[start:start + size]
-                if len(mine) < 2:
-                    continue
-                near = tree.query(V[mine], k=1)[1]
-                centre = tree.query(V[mine].mean(axis=0), k=min(k, len(anchored)))[1]
-                members.append(mine)
-                anchors.append(anchored[np.unique(np.concatenate([np.ravel(near),
-                                                                  np.ravel(centre)]))])
-
-        def flat(parts):
-            return (np.concatenate(parts) if parts else np.zeros(0, np.int64),
-                    np.repeat(np.arange(len(parts)), [len(p) for p in parts]))
-        (vs, group), (an, agroup) = flat(members), flat(anchors)
-        return cls(vs, group, an, agroup, V)
+        # the free components of two or more vertices, each one's vertices in index order
+        sizes = np.bincount(labels, minlength=mesh.n_components)
+        follows = is_free & (sizes[labels] >= 2)
+        if not len(anchored) or not follows.any():
+            none = np.zeros(0, np.int64)
+            return cls(none, none, none, none, V)
+        vs = np.flatnonzero(follows)
+        vs = vs[np.argsort(labels[vs], kind="stable")]
+        lab = labels[vs]
+        group = np.concatenate([[0], np.cumsum(lab[1:] != lab[:-1])]).astype(np.int64)
+        n_groups = int(group[-1]) + 1
+        # all at once (a scan's specks are 10^4 parts): each vertex's nearest anchored
+        # vertex, and the k nearest each part's centroid
+        # a tree for one batch of queries: neither balanced nor compacted builds 1.5x faster
+        tree = cKDTree(V[anchored], balanced_tree=False, compact_nodes=False)
+        near = tree.query(V[vs], k=1, workers=-1)[1]
+        counts = np.bincount(group, minlength=n_groups)
+        centres = np.stack([np.bincount(group, V[vs, a], n_groups) for a in range(3)], 1)
+        kk = min(k, len(anchored))
+        centre = tree.query(centres / counts[:, None], k=kk, workers=-1)[1].reshape(-1, kk)
+        # each part's anchors, once each and in index order: the sorted distinct keys
+        # (by a sort: NumPy's hashing np.unique took 0.3 s on a scan's 6 x 10^5)
+        key = np.sort(np.concatenate([group * len(anchored) + near,
+                                      np.repeat(np.arange(n_groups), kk) * len(anchored)
+                                      + centre.ravel()]))
+        key = key[np.concatenate([[True], key[1:] != key[:-1]])]
+        return cls(vs.astype(np.int64), group, anchored[key % len(anchored)],
+                   key // len(anchored), V)
 
     @cached_property
     def _rest_anchors(self) -> np.ndarray:

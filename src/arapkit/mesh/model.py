@@ -275,6 +275,37 @@ def _unique_edges(he, n):  # pragma: no cover - compiled
     return keys[:count].copy(), inverse
 
 
+@nb.njit(cache=True, nogil=True)
+def union_root(parent, v):  # pragma: no cover - compiled
+    """The representative of v's set in a union-find forest, halving the path on the way."""
+    while parent[v] != v:
+        parent[v] = parent[parent[v]]
+        v = parent[v]
+    return v
+
+
+@nb.njit(cache=True, nogil=True)
+def _row_components(E, n):  # pragma: no cover - compiled
+    """Component labels of ``n`` vertices where each row of ``E`` (edges or faces) links
+    its vertices, numbered by their lowest vertex (as SciPy's ``connected_components``)."""
+    parent = np.arange(n)
+    for e in range(E.shape[0]):
+        for c in range(1, E.shape[1]):
+            ra, rb = union_root(parent, E[e, 0]), union_root(parent, E[e, c])
+            if ra != rb:  # the lower root stays: each set's root is its lowest vertex
+                parent[max(ra, rb)] = min(ra, rb)
+    labels = np.empty(n, dtype=np.int32)
+    count = 0
+    for v in range(n):
+        r = union_root(parent, v)
+        if r == v:
+            labels[v] = count
+            count += 1
+        else:
+            labels[v] = labels[r]
+    return labels
+
+
 class EdgeTopology:
     """Vertex adjacency and connected components of anything with ``n_vertices`` and
     ``edges`` (a :class:`Mesh`, or the solver's :class:`arapkit.arap.problem.EdgeGraph`).
@@ -299,7 +330,15 @@ class EdgeTopology:
 
     @cached_property
     def _components(self) -> tuple[int, np.ndarray]:
-        return connected_components(self.adjacency, directed=False)
+        # one compiled union-find pass: SciPy's connected_components on the adjacency
+        # matrix took 0.36 s at 437K vertices, most of it building the matrix
+        labels = _row_components(kernel_input(self._links, np.int64), int(self.n_vertices))
+        return (int(labels.max()) + 1 if len(labels) else 0), labels
+
+    @property
+    def _links(self) -> np.ndarray:
+        """Rows of vertices that are connected: the edges (a mesh: its faces)."""
+        return self.edges
 
     @property
     def n_components(self) -> int:
@@ -534,6 +573,11 @@ class Mesh(EdgeTopology):
     def edges(self) -> np.ndarray:
         """Unique undirected edges ``(i, j)`` with ``i < j``, sorted lexicographically."""
         return self._edge_ids[0]
+
+    @property
+    def _links(self) -> np.ndarray:
+        # the faces connect what their edges do, without the unique edge list (0.1 s)
+        return self.faces
 
     @property
     def face_edges(self) -> np.ndarray:

@@ -22,7 +22,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..validate import positions_of
-from .model import COORDINATE_RANGE, extent, kernel_input
+from .model import COORDINATE_RANGE, extent, kernel_input, union_root
 
 __all__ = [
     "HandleContext",
@@ -153,27 +153,18 @@ def _part_sizes(F, n):  # pragma: no cover - compiled
         for c in range(3):
             a, b = F[f, c], F[f, (c + 1) % 3]
             used[a] = True
-            ra, rb = _root(parent, a), _root(parent, b)
+            ra, rb = union_root(parent, a), union_root(parent, b)
             if ra != rb:
                 parent[max(ra, rb)] = min(ra, rb)
     count = np.zeros(n, dtype=np.int64)
     for v in range(n):
         if used[v]:
-            count[_root(parent, v)] += 1
+            count[union_root(parent, v)] += 1
     out = np.zeros(n, dtype=np.int64)
     for v in range(n):
         if used[v]:
-            out[v] = count[_root(parent, v)]
+            out[v] = count[union_root(parent, v)]
     return out
-
-
-@nb.njit(cache=True, nogil=True)
-def _root(parent, v):  # pragma: no cover - compiled
-    """The representative of v's set, halving the path on the way."""
-    while parent[v] != v:
-        parent[v] = parent[parent[v]]
-        v = parent[v]
-    return v
 
 
 @nb.njit(cache=True, nogil=True)
@@ -185,15 +176,15 @@ def _reach(F, mask, seed):  # pragma: no cover - compiled
         for c in range(3):
             a, b = F[f, c], F[f, (c + 1) % 3]
             if mask[a] and mask[b]:
-                ra, rb = _root(parent, a), _root(parent, b)
+                ra, rb = union_root(parent, a), union_root(parent, b)
                 if ra != rb:
                     parent[max(ra, rb)] = min(ra, rb)
     out = np.zeros(n, dtype=np.bool_)
     if not mask[seed]:
         return out
-    rs = _root(parent, seed)
+    rs = union_root(parent, seed)
     for v in range(n):
-        out[v] = mask[v] and _root(parent, v) == rs
+        out[v] = mask[v] and union_root(parent, v) == rs
     return out
 
 

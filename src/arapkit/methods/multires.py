@@ -57,7 +57,13 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
-from ..arap.constraints import check_handles, check_targets, rigid_motions
+from ..arap.constraints import (
+    Followers,
+    anchor_components,
+    check_handles,
+    check_targets,
+    rigid_motions,
+)
 from ..arap.loop import Result
 from ..errors import InputError
 from ..mesh.model import Mesh
@@ -811,6 +817,7 @@ class MultiresDeformer:
         self._fit = _region_sample(self._region, FIT_POINTS)
         self._proxy_handles, self._proxy_region = coarse_handles(
             self.binding, H, self._region, self.mesh.n_vertices)
+        self._parts: tuple[np.ndarray, Followers | None, Followers | None] | None = None
 
     def _proxy_rings(self) -> np.ndarray:
         return proxy_rings(self._rings, self.binding.near_full, self.edge_ratio)
@@ -959,8 +966,56 @@ class MultiresDeformer:
         return Preview(self.to_full(res, T) if full else None, res)
 
     def to_full(self, proxy: Result, targets) -> np.ndarray:
-        """The full mesh's shape from a proxy result: skinned, handles at ``targets``."""
-        return self._onto_full(self.binding, proxy, self.checked_targets(targets))
+        """The full mesh's shape from a proxy result: skinned, handles at ``targets``, and
+        the parts without a handle placed by the exact solve's own rule."""
+        X = self._onto_full(self.binding, proxy, self.checked_targets(targets))
+        self._place_free_parts(X)
+        return X
+
+    def _place_free_parts(self, X: np.ndarray) -> None:
+        """Place the parts the proxy does not solve as the full solve does (in place).
+
+        Skinned with its one nearest proxy vertex, a speck far off the surface (a scan's
+        debris) turns with that vertex's rotation and lands, by the lever arm, up to 20 %
+        of the diagonal from the exact solve's placement. Instead a part without a handle
+        follows the rigid fit to its anchors (:class:`Followers`, the full problem's own
+        rule) or stays at rest (``free_components="fix"``), and a speck with a handle
+        moves rigidly with its handled vertices (exact for the editor's rigid moves). The
+        full solve ignores the first two in its start, so :meth:`fine_start` skips this.
+        """
+        if self._parts is None:  # found once per handle set
+            self._parts = self._free_parts()
+        fixed, followers, riders = self._parts
+        X[fixed] = self.mesh.vertices[fixed]  # where a part follows nothing: at rest
+        for rule in (followers, riders):
+            if rule is not None:
+                rule.apply(X)
+
+    def _free_parts(self) -> tuple[np.ndarray, Followers | None, Followers | None]:
+        """The full mesh's parts without a handle, their rule, and the handled specks'."""
+        policy = self._options.get("free_components", "follow")
+        fixed = anchor_components(self.mesh, self.handles, policy)[0]
+        followers = Followers.of(self.mesh, fixed) if policy == "follow" else None
+        covered = self.binding.covered
+        if covered is None or covered[self.handles].all():
+            return fixed, followers, None
+        # each handled speck's other vertices follow the fit to its own handled ones
+        labels = self.mesh.component_labels
+        H = self.handles[~covered[self.handles]]
+        free = ~covered
+        free[self.handles] = False
+        with_handle = np.zeros(self.mesh.n_components, dtype=bool)
+        with_handle[labels[H]] = True
+        vs = np.flatnonzero(free & with_handle[labels])
+        if not len(vs):
+            return fixed, followers, None
+        vs = vs[np.argsort(labels[vs], kind="stable")]
+        parts = np.unique(labels[vs])
+        H = H[np.isin(labels[H], parts)]
+        group = np.searchsorted(parts, labels[vs]).astype(np.int64)
+        riders = Followers(vs, group, H, np.searchsorted(parts, labels[H]).astype(np.int64),
+                           np.asarray(self.mesh.vertices, dtype=np.float64))
+        return fixed, followers, riders
 
     def _onto_full(self, binding: Binding, coarse: Result, T: np.ndarray) -> np.ndarray:
         X = binding.skin(coarse.vertices, coarse.rotations)
