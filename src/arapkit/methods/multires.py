@@ -123,10 +123,10 @@ def specks(mesh: Mesh, n_target: int) -> np.ndarray | None:
     stands for, ``n / n_target``: a scan's floating debris, too small to be seen at the
     coarse mesh's resolution. The decimator cannot collapse an isolated triangle, so 20,000
     of them round the dragon made its "20K" proxy 51,443 vertices, and every preview
-    iteration 2.5 times as dear. They are left out of the decimator's input and follow the
-    nearest coarse vertex instead (:class:`Binding`), which is what the full solve does
-    with a part that has no handle. None where the mesh is its own coarse mesh, and where
-    specks are more than half of it (an unwelded triangle soup: every face a part).
+    iteration 2.5 times as dear. They are left out of the decimator's input; a full shape
+    made from the proxy places them by the full solve's own rule
+    (:meth:`MultiresDeformer.to_full`). None where the mesh is its own coarse mesh, and
+    where specks are more than half of it (an unwelded triangle soup: every face a part).
 
     Examples
     --------
