@@ -202,10 +202,7 @@ class Followers:
         if not len(anchored) or not follows.any():
             none = np.zeros(0, np.int64)
             return cls(none, none, none, none, V)
-        vs = np.flatnonzero(follows)
-        vs = vs[np.argsort(labels[vs], kind="stable")]
-        lab = labels[vs]
-        group = np.concatenate([[0], np.cumsum(lab[1:] != lab[:-1])]).astype(np.int64)
+        vs, group = _by_part(labels, follows)
         n_groups = int(group[-1]) + 1
         # all at once (a scan's specks are 10^4 parts): each vertex's nearest anchored
         # vertex, and the k nearest each part's centroid
@@ -222,8 +219,32 @@ class Followers:
                                       np.repeat(np.arange(n_groups), kk) * len(anchored)
                                       + centre.ravel()]))
         key = key[np.concatenate([[True], key[1:] != key[:-1]])]
-        return cls(vs.astype(np.int64), group, anchored[key % len(anchored)],
-                   key // len(anchored), V)
+        return cls(vs, group, anchored[key % len(anchored)], key // len(anchored), V)
+
+    @classmethod
+    def on_own_anchors(cls, mesh: Mesh | EdgeGraph, follows: np.ndarray,
+                       anchors: np.ndarray) -> Followers:
+        """Each part's vertices in the (n,) bool ``follows`` follow the rigid fit to that
+        part's own ``anchors`` (vertex indices); parts without an anchor are left out.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from arapkit import Mesh
+        >>> V = np.eye(3).tolist() + (np.eye(3) + [0, 0, 2]).tolist()
+        >>> m = Mesh(np.array(V), [[0, 1, 2], [3, 4, 5]])
+        >>> f = Followers.on_own_anchors(m, np.array([0, 1, 1, 0, 1, 1], bool), np.array([0]))
+        >>> f.vertices.tolist(), f.anchors.tolist()
+        ([1, 2], [0])
+        """
+        labels = mesh.component_labels
+        anchored = np.zeros(mesh.n_components, dtype=bool)
+        anchored[labels[anchors]] = True
+        vs, group = _by_part(labels, follows & anchored[labels])
+        parts = labels[vs][np.flatnonzero(np.diff(group, prepend=-1))]  # ascending
+        anchors = np.asarray(anchors, dtype=np.int64)[np.isin(labels[anchors], parts)]
+        return cls(vs, group, anchors, np.searchsorted(parts, labels[anchors]).astype(np.int64),
+                   np.asarray(mesh.vertices))
 
     @cached_property
     def _rest_anchors(self) -> np.ndarray:
@@ -238,6 +259,17 @@ class Followers:
         # one pass: NumPy's R[group] alone is 9 doubles a follower (a scan's specks: 60K)
         _place(R, t, self.group, self.vertices, self.rest, deformed,
                _NO_ROTATIONS if rotations is None else rotations)
+
+
+def _by_part(labels: np.ndarray, mask: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The vertices in ``mask`` sorted by part (in index order within one), and each one's
+    part numbered ``0..G-1`` in that order: :class:`Followers`' numbering."""
+    vs = np.flatnonzero(mask)
+    vs = vs[np.argsort(labels[vs], kind="stable")].astype(np.int64)
+    lab = labels[vs]
+    group = np.zeros(len(vs), dtype=np.int64)
+    group[1:] = np.cumsum(lab[1:] != lab[:-1])
+    return vs, group
 
 
 _NO_ROTATIONS = np.zeros((0, 3, 3))

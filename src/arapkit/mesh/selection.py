@@ -30,7 +30,6 @@ __all__ = [
     "HandleSet",
     "check_target_reach",
     "connected_region",
-    "part_sizes",
     "rotation_matrix",
     "select_box",
     "select_nearest",
@@ -127,44 +126,6 @@ def connected_region(faces: np.ndarray, mask: np.ndarray, seed: int) -> np.ndarr
     """
     return np.flatnonzero(_reach(kernel_input(faces, np.int64), kernel_input(mask, np.bool_),
                                  int(seed)))
-
-
-def part_sizes(faces: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(n,) the number of vertices in each vertex's part (its faces' connected component);
-    0 for a vertex in no face.
-
-    One union-find pass over the faces (no edge list, no sparse matrix): 0.1 s at 1.75M
-    vertices, for the decimator to tell a scan from its floating specks.
-
-    Examples
-    --------
-    >>> F = np.array([[0, 1, 2], [1, 3, 2], [4, 5, 6]])
-    >>> part_sizes(F, 8).tolist()
-    [4, 4, 4, 4, 3, 3, 3, 0]
-    """
-    return _part_sizes(kernel_input(faces, np.int64), int(n_vertices))
-
-
-@nb.njit(cache=True, nogil=True)
-def _part_sizes(F, n):  # pragma: no cover - compiled
-    parent = np.arange(n)
-    used = np.zeros(n, dtype=np.bool_)
-    for f in range(F.shape[0]):
-        for c in range(3):
-            a, b = F[f, c], F[f, (c + 1) % 3]
-            used[a] = True
-            ra, rb = union_root(parent, a), union_root(parent, b)
-            if ra != rb:
-                parent[max(ra, rb)] = min(ra, rb)
-    count = np.zeros(n, dtype=np.int64)
-    for v in range(n):
-        if used[v]:
-            count[union_root(parent, v)] += 1
-    out = np.zeros(n, dtype=np.int64)
-    for v in range(n):
-        if used[v]:
-            out[v] = count[union_root(parent, v)]
-    return out
 
 
 @nb.njit(cache=True, nogil=True)

@@ -67,7 +67,6 @@ from ..arap.constraints import (
 from ..arap.loop import Result
 from ..errors import InputError
 from ..mesh.model import Mesh
-from ..mesh.selection import part_sizes
 from ..mesh.weights import DEFAULT_WEIGHTS
 from ..validate import MAX_RINGS, integer, ring_sizes
 from .deformer import MULTIRES_AUTO_VERTICES, Deformer, register_variant
@@ -141,8 +140,10 @@ def specks(mesh: Mesh, n_target: int) -> np.ndarray | None:
     if own:
         return None
     least = mesh.n_vertices // n_target
-    sizes = part_sizes(mesh.faces, mesh.n_vertices)
-    small = (sizes > 0) & (sizes < least)
+    labels = mesh.component_labels  # kept by the mesh: the binding asks again
+    sizes = np.bincount(labels)[labels]
+    small = sizes < least
+    small[mesh.unreferenced] = False  # a vertex in no face is in no part
     count = int(small.sum())
     return small if 0 < count <= mesh.n_vertices // 2 else None
 
@@ -996,25 +997,13 @@ class MultiresDeformer:
         policy = self._options.get("free_components", "follow")
         fixed = anchor_components(self.mesh, self.handles, policy)[0]
         followers = Followers.of(self.mesh, fixed) if policy == "follow" else None
-        covered = self.binding.covered
-        if covered is None or covered[self.handles].all():
-            return fixed, followers, None
-        # each handled speck's other vertices follow the fit to its own handled ones
-        labels = self.mesh.component_labels
-        H = self.handles[~covered[self.handles]]
-        free = ~covered
-        free[self.handles] = False
-        with_handle = np.zeros(self.mesh.n_components, dtype=bool)
-        with_handle[labels[H]] = True
-        vs = np.flatnonzero(free & with_handle[labels])
-        if not len(vs):
-            return fixed, followers, None
-        vs = vs[np.argsort(labels[vs], kind="stable")]
-        parts = np.unique(labels[vs])
-        H = H[np.isin(labels[H], parts)]
-        group = np.searchsorted(parts, labels[vs]).astype(np.int64)
-        riders = Followers(vs, group, H, np.searchsorted(parts, labels[H]).astype(np.int64),
-                           np.asarray(self.mesh.vertices, dtype=np.float64))
+        covered, riders = self.binding.covered, None
+        if covered is not None and not covered[self.handles].all():
+            # each handled speck's other vertices follow the fit to its own handled ones
+            free = ~covered
+            free[self.handles] = False
+            riders = Followers.on_own_anchors(self.mesh, free,
+                                              self.handles[~covered[self.handles]])
         return fixed, followers, riders
 
     def _onto_full(self, binding: Binding, coarse: Result, T: np.ndarray) -> np.ndarray:
