@@ -321,6 +321,12 @@ def decimate(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> Mesh:
     if hit is None and running is not None:
         # the child falls back to this process itself: an error here is the decimator's own
         hit = _proxy_arrays(*running.result(), _frame(mesh))
+        # kept here too: the job's done callback (_keep) runs on the pool's thread after
+        # result() has returned, so a caller could still find the job pending and no proxy
+        with _cache_lock:
+            if _pending.get(key) is running:
+                del _pending[key]
+            _store(key, hit)
     if hit is None:
         frame = _frame(mesh)
         hit = _proxy_arrays(*_simplify(*_decimator_input(mesh, frame, n_target), n_target),
