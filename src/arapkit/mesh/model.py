@@ -8,6 +8,7 @@ what it can while saying so in :attr:`Mesh.notes`, and raises
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 from functools import cached_property
@@ -638,6 +639,25 @@ class Mesh(EdgeTopology):
     def bounding_box_diagonal(self) -> float:
         """Length of the bounding-box diagonal (the mesh's scale): :func:`bounding_box_diagonal`."""
         return bounding_box_diagonal(self.vertices)
+
+    @cached_property
+    def content_hash(self) -> str:
+        """SHA-1 (hex) of the vertices (float64) and faces (int64): a key for what depends
+        on the mesh's content only (a proxy). Kept: 0.15 s at 1.75M vertices, asked by the
+        decimation's start and again by its collection.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> a = Mesh(np.eye(3), [[0, 1, 2]])
+        >>> a.content_hash == Mesh(np.eye(3), [[0, 1, 2]]).content_hash, len(a.content_hash)
+        (True, 40)
+        """
+        h = hashlib.sha1()
+        for a in (np.ascontiguousarray(self.vertices, dtype=np.float64),
+                  np.ascontiguousarray(self.faces, dtype=np.int64)):
+            h.update(a.tobytes())
+        return h.hexdigest()
 
     def check_number_range(self) -> None:
         """:func:`check_number_range` on this mesh's vertices (message names the mesh)."""

@@ -40,7 +40,6 @@ True
 
 from __future__ import annotations
 
-import hashlib
 import io
 import subprocess
 import sys
@@ -101,12 +100,7 @@ _cache_lock = threading.Lock()
 
 
 def _content_key(mesh: Mesh, n_target: int) -> str:
-    h = hashlib.sha1()
-    for a in (np.ascontiguousarray(mesh.vertices, dtype=np.float64),
-              np.ascontiguousarray(mesh.faces, dtype=np.int64)):
-        h.update(a.tobytes())
-    h.update(str(n_target).encode())
-    return h.hexdigest()
+    return f"{mesh.content_hash}:{n_target}"
 
 
 def _frame(mesh: Mesh) -> tuple[np.ndarray, float]:
@@ -675,13 +669,16 @@ class MultiresDeformer:
         full = np.asarray(mesh.vertices, dtype=np.float64)
         tree = full_tree_of(full)
         _ = mesh.mean_edge_length
+        left_out = specks(mesh, proxy_vertices)
+        self._covered = None if left_out is None else ~left_out
+        self._index_handles()
+        self._parts = self._free_parts()  # needs no proxy: 0.5 s at 1.75M off the wait
         self.proxy_mesh = decimate(mesh, proxy_vertices)
         self._level_sizes = self._check_levels(levels, proxy_vertices)
         self.levels: list[Level] = []
-        self.binding = Binding.between(full, self.proxy_mesh.vertices, tree,
-                                       specks(mesh, proxy_vertices))
+        self.binding = Binding.between(full, self.proxy_mesh.vertices, tree, left_out)
         self.edge_ratio = mesh.mean_edge_length / max(self.proxy_mesh.mean_edge_length, 1e-300)
-        self._map_handles()
+        self._bind_handles()
         # the proxy poses the full problem's method and weights; its parts without a
         # handle follow, whatever the full mesh does with its own
         self.proxy = Deformer(self.proxy_mesh, self._proxy_handles, self._proxy_rings(),
@@ -813,8 +810,9 @@ class MultiresDeformer:
             _ = self.full
 
     # -- what the proxy sees ------------------------------------------------------------
-    def _map_handles(self) -> None:
-        """Proxy handles: proxy vertices bound to a handle, each with its handle region."""
+    def _index_handles(self) -> None:
+        """What the full mesh's handles need of the full mesh only: their regions, the
+        points their motions are fitted to; the parts' rule is found again on first use."""
         H = self.handles
         self._motions_for: tuple[np.ndarray, tuple[np.ndarray, np.ndarray]] | None = None
         self._last_targets: tuple[np.ndarray, np.ndarray] | None = None
@@ -822,9 +820,12 @@ class MultiresDeformer:
         self._region = _handle_regions(self.mesh, H)
         self._n_regions = int(self._region.max()) + 1 if len(H) else 0
         self._fit = _region_sample(self._region, FIT_POINTS)
-        self._proxy_handles, self._proxy_region = coarse_handles(
-            self.binding, H, self._region, self.mesh.n_vertices)
         self._parts: tuple[np.ndarray, Followers | None, Followers | None] | None = None
+
+    def _bind_handles(self) -> None:
+        """Proxy handles: proxy vertices bound to a handle, each with its handle region."""
+        self._proxy_handles, self._proxy_region = coarse_handles(
+            self.binding, self.handles, self._region, self.mesh.n_vertices)
 
     def _proxy_rings(self) -> np.ndarray:
         return proxy_rings(self._rings, self.binding.near_full, self.edge_ratio)
@@ -899,7 +900,8 @@ class MultiresDeformer:
         self.handles = check_handles(self.mesh, handles)
         self._version += 1
         self._checked = None
-        self._map_handles()
+        self._index_handles()
+        self._bind_handles()
         self.proxy.set_handles(self._proxy_handles)
         self.proxy.prepare()
         self._proxy_shape = None
@@ -1003,7 +1005,7 @@ class MultiresDeformer:
         policy = self._options.get("free_components", "follow")
         fixed = anchor_components(self.mesh, self.handles, policy)[0]
         followers = Followers.of(self.mesh, fixed) if policy == "follow" else None
-        covered, riders = self.binding.covered, None
+        covered, riders = self._covered, None
         if covered is not None and not covered[self.handles].all():
             # each handled speck's other vertices follow the fit to its own handled ones
             free = ~covered
