@@ -170,3 +170,17 @@ def test_component_labels_are_scipys(seed):
     assert np.array_equal(m.component_labels, want)
     g = EdgeGraph.from_mesh(m)
     assert g.n_components == k and np.array_equal(g.component_labels, want)
+
+
+def test_content_hash_tells_meshes_apart_by_every_number():
+    """The proxy cache's key: equal for equal content, different for one vertex moved by
+    one unit in the last place or one face's corners turned."""
+    m = bar()
+    same = Mesh(m.vertices.copy(), m.faces.copy())
+    assert same.content_hash == m.content_hash
+    V = m.vertices.copy()
+    V[17, 1] = np.nextafter(V[17, 1], np.inf)
+    assert Mesh(V, m.faces).content_hash != m.content_hash
+    F = m.faces.copy()
+    F[5] = F[5, [1, 2, 0]]
+    assert Mesh(m.vertices, F).content_hash != m.content_hash
