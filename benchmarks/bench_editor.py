@@ -38,7 +38,11 @@ then also reports:
   from a brush stroke's end in the r view (whose coloured display is rebuilt) to the
   first shape with the new r, both through the editor's own ``after_edit``;
 * ``peak GiB``: the process's peak resident memory from the editor's start (the mesh's
-  loading and subdivision are not counted).
+  loading and subdivision are not counted); ``children``: the largest peak of a child
+  process (the proxy's decimation, a factor built beside the preview); ``sampled total``:
+  the highest sum of the process's and its children's resident memory, sampled every 20 ms;
+* ``longest stall``: the longest time no Python thread of the editor could run, from the
+  open to the repaint's shape (a C call holding the GIL; the page and the preview wait).
 
 Usage for the scan::
 
@@ -55,6 +59,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import os
 import socket
 import sys
 import tempfile
@@ -174,6 +179,65 @@ def peak_gib() -> float:
     return float("nan")
 
 
+def _status_kib(pid: int | str, field: str) -> int:
+    """A field of ``/proc/<pid>/status`` in KiB (0 where unreadable: the process ended)."""
+    try:
+        with open(f"/proc/{pid}/status") as f:
+            for line in f:
+                if line.startswith(field + ":"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return 0
+
+
+def _children() -> list[str]:
+    """This process's child processes (Linux)."""
+    out: list[str] = []
+    try:
+        for task in os.listdir("/proc/self/task"):
+            with open(f"/proc/self/task/{task}/children") as f:
+                out += f.read().split()
+    except OSError:
+        pass
+    return out
+
+
+class Watch:
+    """A thread ticking every 5 ms: the longest gap between its ticks is the longest time
+    no Python thread of the editor could run (a C call holding the GIL: the page, its
+    websocket and the preview all wait), and every 20 ms it adds the resident memory of
+    this process and its children (the decimation's, the factor's)."""
+
+    def __init__(self) -> None:
+        self.stall = 0.0
+        self.total_peak = 0
+        self.child_peak = 0
+        self._stop = False
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        last = time.perf_counter()
+        k = 0
+        while not self._stop:
+            time.sleep(0.005)
+            now = time.perf_counter()
+            self.stall = max(self.stall, now - last - 0.005)
+            last = now
+            k += 1
+            if k % 4 == 0:
+                kids = _children()
+                rss = _status_kib("self", "VmRSS") + sum(_status_kib(c, "VmRSS") for c in kids)
+                self.total_peak = max(self.total_peak, rss)
+                self.child_peak = max([self.child_peak] + [_status_kib(c, "VmHWM")
+                                                           for c in kids])
+
+    def close(self) -> None:
+        self._stop = True
+        self._thread.join(1.0)
+
+
 def edit_to_shape(app, sends: list[tuple[int, float]], edit) -> float:
     """Seconds from an edit (``edit()`` then the UI's ``after_edit``, under the editor's
     lock, as a button or a brush stroke's end does it) to the first shape that obeys it."""
@@ -209,6 +273,7 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
     handle = st.add_handle(cap, name="cap")
     first: list[float] = []
     reset_peak()
+    watch = Watch()
     with tempfile.TemporaryDirectory() as tmp:
         t_open = time.perf_counter()
         app = EditorApp(st, port=free_port(), export_dir=tmp)
@@ -294,8 +359,12 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
                 app, sends, lambda: st.paint(st.vertices[mid], 0.05 * diag, r + 2))
             client.close()
             out["peak_gib"] = peak_gib()
+            out["stall_s"] = watch.stall
+            out["child_gib"] = watch.child_peak / 2**20
+            out["total_gib"] = watch.total_peak / 2**20
             return out
         finally:
+            watch.close()
             app.stop()
 
 
@@ -375,7 +444,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"repaint (r view) -> shape {s['repaint_s']:.2f} s · "
                   f"preview vs exact max {s.get('prev_max', float('nan')):.4f} p95 "
                   f"{s.get('prev_p95', float('nan')):.4f} of diag · peak "
-                  f"{s['peak_gib']:.2f} GiB", flush=True)
+                  f"{s['peak_gib']:.2f} GiB (children {s['child_gib']:.2f}, sampled total "
+                  f"{s['total_gib']:.2f}) · longest stall {s['stall_s']:.2f} s", flush=True)
     return 0 if ok else 1
 
 

@@ -11,7 +11,8 @@ vertices held at given positions. This module holds what they share:
 * :class:`Elimination`: the split into free and constrained vertices, the reduced matrix
   ``A_ff`` (factorised once) and the coupling ``A_fc`` that moves the constrained values to
   the right-hand side, ``A_ff x_f = b_f - A_fc x_c``;
-* :class:`CholeskyFactor`: CHOLMOD (via cholespy) with its C-level chatter silenced.
+* :class:`CholeskyFactor`: CHOLMOD (via cholespy) with its C-level chatter silenced, in a
+  child process where one was asked for (:func:`arapkit.arap.childfactor.factors_in_child`).
 
 Anything with ``name``, ``n_vertices``, ``n_components`` and ``component_labels`` (a
 :class:`~arapkit.mesh.model.Mesh` or an :class:`~arapkit.arap.graph.EdgeGraph`) can be
@@ -33,6 +34,7 @@ import scipy.sparse as sp
 
 from ..errors import Advice, InputError
 from ..validate import handle_indices, target_positions
+from .childfactor import ChildCholesky, ChildUnavailable, wants_child
 from .rotations import fit_rotations
 
 if TYPE_CHECKING:
@@ -455,14 +457,17 @@ class CholeskyFactor:
         A = sp.coo_matrix(A)
         self.n = A.shape[0]
         try:
-            with quiet_c_output():
-                self._solver = CholeskySolverD(
-                    self.n,
-                    A.row.astype(np.int32),
-                    A.col.astype(np.int32),
-                    A.data.astype(np.float64),
-                    MatrixType.COO,
-                )
+            self._solver = None
+            if wants_child(self.n):  # built beside other work: the GIL stays free
+                try:  # converted there, one array at a time
+                    self._solver = ChildCholesky(self.n, A.row, A.col, A.data)
+                except ChildUnavailable:
+                    pass  # the same factor, made here
+            if self._solver is None:
+                with quiet_c_output():
+                    self._solver = CholeskySolverD(
+                        self.n, A.row.astype(np.int32), A.col.astype(np.int32),
+                        A.data.astype(np.float64), MatrixType.COO)
         except ValueError:
             msg = f"{what}: the system matrix is not positive definite"
             raise InputError(

@@ -56,6 +56,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from ..arap.childfactor import factors_in_child
 from ..arap.constraints import (
     Followers,
     anchor_components,
@@ -762,6 +763,13 @@ class MultiresDeformer:
         self._built = version
         return self._full
 
+    def _build_full_beside(self) -> Deformer:
+        """:meth:`_build_full` on the background thread, its large factors made and solved in
+        a child process: cholespy holds the GIL throughout, and a factor built here froze
+        every other thread (the editor's page and preview: 19 s at 1.75M vertices)."""
+        with factors_in_child():
+            return self._build_full()
+
     def _stale(self) -> bool:
         return self._full is None or self._built != self._version
 
@@ -790,7 +798,7 @@ class MultiresDeformer:
         # a finished build may be for handles or r changed since: then build again
         if self._pending is None or self._pending.done():
             self._pending_version = self._version
-            self._pending = self._pool.submit(self._build_full)
+            self._pending = self._pool.submit(self._build_full_beside)
         try:
             self._pending.result(timeout)
         except FutureTimeout:
@@ -805,7 +813,7 @@ class MultiresDeformer:
                     self._pending is not None and not self._pending.done()
                     and self._pending_version == self._version):
                 self._pending_version = self._version
-                self._pending = self._pool.submit(self._build_full)
+                self._pending = self._pool.submit(self._build_full_beside)
         else:
             _ = self.full
 
