@@ -40,7 +40,8 @@ then also reports:
 * ``peak GiB``: the process's peak resident memory from the editor's start (the mesh's
   loading and subdivision are not counted); ``children``: the largest peak of a child
   process (the proxy's decimation, a factor built beside the preview); ``sampled total``:
-  the highest sum of the process's and its children's resident memory, sampled every 20 ms;
+  the highest sum of the process's and its children's proportional resident memory (Pss:
+  a page they share counts once), sampled every 100 ms;
 * ``longest stall``: the longest time no Python thread of the editor could run, from the
   open to the repaint's shape (a C call holding the GIL; the page and the preview wait).
 
@@ -191,6 +192,20 @@ def _status_kib(pid: int | str, field: str) -> int:
     return 0
 
 
+def _pss_kib(pid: int | str) -> int:
+    """``Pss`` of ``/proc/<pid>/smaps_rollup`` in KiB: resident memory with each shared
+    page divided among the processes that map it (a buffer shared by the editor and a
+    child counts once in their sum); 0 where unreadable."""
+    try:
+        with open(f"/proc/{pid}/smaps_rollup") as f:
+            for line in f:
+                if line.startswith("Pss:"):
+                    return int(line.split()[1])
+    except OSError:
+        pass
+    return 0
+
+
 def _children() -> list[str]:
     """This process's child processes (Linux)."""
     out: list[str] = []
@@ -206,8 +221,8 @@ def _children() -> list[str]:
 class Watch:
     """A thread ticking every 5 ms: the longest gap between its ticks is the longest time
     no Python thread of the editor could run (a C call holding the GIL: the page, its
-    websocket and the preview all wait), and every 20 ms it adds the resident memory of
-    this process and its children (the decimation's, the factor's)."""
+    websocket and the preview all wait), and every 100 ms it adds the proportional resident
+    memory (Pss) of this process and its children (the decimation's, the factor's)."""
 
     def __init__(self) -> None:
         self.stall = 0.0
@@ -226,9 +241,9 @@ class Watch:
             self.stall = max(self.stall, now - last - 0.005)
             last = now
             k += 1
-            if k % 4 == 0:
+            if k % 20 == 0:  # smaps_rollup walks the page tables: not too often
                 kids = _children()
-                rss = _status_kib("self", "VmRSS") + sum(_status_kib(c, "VmRSS") for c in kids)
+                rss = _pss_kib("self") + sum(_pss_kib(c) for c in kids)
                 self.total_peak = max(self.total_peak, rss)
                 self.child_peak = max([self.child_peak] + [_status_kib(c, "VmHWM")
                                                            for c in kids])

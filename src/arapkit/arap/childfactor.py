@@ -102,6 +102,11 @@ except ValueError:
     reply.write(b"notpd\n")
     sys.exit(0)
 del row, col, data
+try:  # CHOLMOD's workspace back to the system, as this process does after a factor
+    import ctypes
+    ctypes.CDLL(None).malloc_trim(0)
+except (OSError, AttributeError):
+    pass
 reply.write(b"ready\n")
 buf = None
 for line in sys.stdin.buffer:
