@@ -131,11 +131,12 @@ def _scratch_dir() -> str:
 
 
 def _close(proc: subprocess.Popen, folder: str) -> None:
-    """End the child (its stdin's end is its signal) and remove its folder."""
+    """End the child (its stdin's end is its signal; one still factorising does not read
+    it, and is killed) and remove its folder."""
     try:
         if proc.stdin is not None:
             proc.stdin.close()
-        proc.wait(timeout=10)
+        proc.wait(timeout=2)
     except (OSError, subprocess.TimeoutExpired):
         proc.kill()
     finally:
