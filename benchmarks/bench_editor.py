@@ -171,19 +171,13 @@ def reset_peak() -> None:
         pass
 
 
-def peak_gib() -> float:
-    """This process's peak resident memory (VmHWM), GiB."""
-    with open("/proc/self/status") as f:
-        for line in f:
-            if line.startswith("VmHWM:"):
-                return int(line.split()[1]) / 2**20
-    return float("nan")
-
-
-def _status_kib(pid: int | str, field: str) -> int:
-    """A field of ``/proc/<pid>/status`` in KiB (0 where unreadable: the process ended)."""
+def _proc_kib(pid: int | str, file: str, field: str) -> int:
+    """The ``field`` line of ``/proc/<pid>/<file>`` in KiB (0 where unreadable: the
+    process ended, or no Linux). ``status``'s ``VmHWM`` is a peak; ``smaps_rollup``'s
+    ``Pss`` is resident memory with each shared page divided among the processes that map
+    it (a buffer shared by the editor and a child counts once in their sum)."""
     try:
-        with open(f"/proc/{pid}/status") as f:
+        with open(f"/proc/{pid}/{file}") as f:
             for line in f:
                 if line.startswith(field + ":"):
                     return int(line.split()[1])
@@ -192,18 +186,10 @@ def _status_kib(pid: int | str, field: str) -> int:
     return 0
 
 
-def _pss_kib(pid: int | str) -> int:
-    """``Pss`` of ``/proc/<pid>/smaps_rollup`` in KiB: resident memory with each shared
-    page divided among the processes that map it (a buffer shared by the editor and a
-    child counts once in their sum); 0 where unreadable."""
-    try:
-        with open(f"/proc/{pid}/smaps_rollup") as f:
-            for line in f:
-                if line.startswith("Pss:"):
-                    return int(line.split()[1])
-    except OSError:
-        pass
-    return 0
+def peak_gib() -> float:
+    """This process's peak resident memory (VmHWM), GiB."""
+    kib = _proc_kib("self", "status", "VmHWM")
+    return kib / 2**20 if kib else float("nan")
 
 
 def _children() -> list[str]:
@@ -243,9 +229,9 @@ class Watch:
             k += 1
             if k % 20 == 0:  # smaps_rollup walks the page tables: not too often
                 kids = _children()
-                rss = _pss_kib("self") + sum(_pss_kib(c) for c in kids)
-                self.total_peak = max(self.total_peak, rss)
-                self.child_peak = max([self.child_peak] + [_status_kib(c, "VmHWM")
+                pss = sum(_proc_kib(p, "smaps_rollup", "Pss") for p in ["self", *kids])
+                self.total_peak = max(self.total_peak, pss)
+                self.child_peak = max([self.child_peak] + [_proc_kib(c, "status", "VmHWM")
                                                            for c in kids])
 
     def close(self) -> None:

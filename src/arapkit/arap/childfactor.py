@@ -140,9 +140,8 @@ def _close(proc: subprocess.Popen, folder: str) -> None:
     except (OSError, subprocess.TimeoutExpired):
         proc.kill()
     finally:
-        for stream in (proc.stdout,):
-            if stream is not None:
-                stream.close()
+        if proc.stdout is not None:
+            proc.stdout.close()
         shutil.rmtree(folder, ignore_errors=True)
 
 

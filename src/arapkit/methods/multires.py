@@ -671,9 +671,9 @@ class MultiresDeformer:
         tree = full_tree_of(full)
         _ = mesh.mean_edge_length
         left_out = specks(mesh, proxy_vertices)
-        self._covered = None if left_out is None else ~left_out
         self._index_handles()
-        self._parts = self._free_parts()  # needs no proxy: 0.5 s at 1.75M off the wait
+        # needs no proxy: 0.5 s at 1.75M off the wait
+        self._parts = self._free_parts(None if left_out is None else ~left_out)
         self.proxy_mesh = decimate(mesh, proxy_vertices)
         self._level_sizes = self._check_levels(levels, proxy_vertices)
         self.levels: list[Level] = []
@@ -1001,19 +1001,21 @@ class MultiresDeformer:
         full solve ignores the first two in its start, so :meth:`fine_start` skips this.
         """
         if self._parts is None:  # found once per handle set
-            self._parts = self._free_parts()
+            self._parts = self._free_parts(self.binding.covered)
         fixed, followers, riders = self._parts
         X[fixed] = self.mesh.vertices[fixed]  # where a part follows nothing: at rest
         for rule in (followers, riders):
             if rule is not None:
                 rule.apply(X)
 
-    def _free_parts(self) -> tuple[np.ndarray, Followers | None, Followers | None]:
-        """The full mesh's parts without a handle, their rule, and the handled specks'."""
+    def _free_parts(self, covered: np.ndarray | None
+                    ) -> tuple[np.ndarray, Followers | None, Followers | None]:
+        """The full mesh's parts without a handle, their rule, and the handled specks'
+        (``covered``: :attr:`Binding.covered`, the vertices the proxy was made from)."""
         policy = self._options.get("free_components", "follow")
         fixed = anchor_components(self.mesh, self.handles, policy)[0]
         followers = Followers.of(self.mesh, fixed) if policy == "follow" else None
-        covered, riders = self._covered, None
+        riders = None
         if covered is not None and not covered[self.handles].all():
             # each handled speck's other vertices follow the fit to its own handled ones
             free = ~covered
