@@ -75,6 +75,33 @@ def caps(V: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 # --------------------------------------------------------------------------- help, version
 
+def test_python_dash_m_arapkit_is_the_same_door(tmp_path, bar_file):
+    """``python -m arapkit`` runs the command line: same version, same deform output, same
+    one-line errors as the ``arapkit`` script (whose module is ``arapkit.cli``)."""
+    env = {**os.environ, "PYTHONWARNINGS": "ignore"}
+
+    def dash_m(*args):
+        return subprocess.run([sys.executable, "-m", "arapkit", *map(str, args)],
+                              capture_output=True, text=True, env=env, timeout=600)
+
+    assert dash_m("--version").stdout == arapkit("--version").stdout
+    mesh_path, V, _ = bar_file
+    base, tip = caps(V)
+    spec = [{"indices": base.tolist()}, {"indices": tip.tolist(), "translate": [0, 0, 0.5]}]
+    (tmp_path / "h.json").write_text(json.dumps(spec))
+    outs = {}
+    for name, run in (("m", dash_m), ("cli", arapkit)):
+        out = tmp_path / f"{name}.ply"
+        proc = run("deform", mesh_path, "--handles", tmp_path / "h.json", "-o", out, "-q")
+        assert proc.returncode == 0, proc.stderr
+        outs[name] = read_vertices(out)
+    np.testing.assert_array_equal(outs["m"], outs["cli"])
+    bad = dash_m("info", tmp_path / "missing.off")
+    assert bad.returncode == 2
+    assert error_line(bad) == error_line(arapkit("info", tmp_path / "missing.off"))
+
+
+
 
 def test_version_and_help_with_examples():
     v = arapkit("--version")
