@@ -216,8 +216,8 @@ def test_browser_energy_legend_reads_zero_at_rest(tmp_path):
             assert "0 everywhere" in legend.inner_text()
             box = legend.bounding_box()
             assert box is not None and 0 <= box["y"] and box["y"] + box["height"] <= 800
-            # one colour: the shaded node hidden, one node for the lowest energy bin
-            assert len(app.mesh_nodes()) == 2 and not app.mesh_node.visible
+            # one colour: no shaded node, one node for the lowest energy bin
+            assert len(app.mesh_nodes()) == 1 and app.mesh_node is None
     finally:
         app.stop()
 

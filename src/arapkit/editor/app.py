@@ -140,7 +140,8 @@ class EditorApp(Panels, PointerTools, FileActions):
         self.vertex_energy: np.ndarray | None = None
         #: the scale of the loaded mesh (bounding-box diagonal) and its mean edge length
         self.diag, self.edge_length = 1.0, 1.0
-        self._groups: list[tuple[Any, Any]] = []
+        #: a colour view's nodes, each with the mesh vertices it draws (an index array)
+        self._groups: list[tuple[np.ndarray, Any]] = []
         self._gizmos: list[Any] = []
         self._gizmo_serial = 0
         self._markers: dict[str, Any] = {}
@@ -150,6 +151,8 @@ class EditorApp(Panels, PointerTools, FileActions):
         #: offset with the camera's before its float32 upload, so nothing is lost)
         self._origin = np.zeros(3)
         self._frames: list[Any] = []
+        #: the shaded mesh; None in a colour view (viser keeps three copies of a node's
+        #: vertices and two of its faces, 0.15 GiB at 1.75M vertices, hidden or not)
         self.mesh_node: Any = None
         #: a large mesh's proxy, shown instead of the mesh while a drag is previewed
         self.proxy_node: Any = None
@@ -198,13 +201,14 @@ class EditorApp(Panels, PointerTools, FileActions):
 
     def served_vertices(self) -> np.ndarray:
         """The vertex positions last sent to the page: the shaded mesh node's, or in a
-        colour view its groups' (a vertex in no face keeps the shaded node's)."""
-        out = np.asarray(self.mesh_node.vertices, dtype=np.float64)
-        if self._groups:
-            out = out.copy()
-            for g, node in self._groups:
-                out[g.vertices] = node.vertices
-        return out + self._origin
+        colour view its groups' (a vertex in no face, drawn by none, is given where the
+        state has it)."""
+        if self.mesh_node is not None:
+            return np.asarray(self.mesh_node.vertices, dtype=np.float64) + self._origin
+        out = np.array(self.state.vertices, dtype=np.float64)
+        for idx, node in self._groups:
+            out[idx] = np.asarray(node.vertices, dtype=np.float64) + self._origin
+        return out
 
     def local32(self, V: np.ndarray) -> np.ndarray:
         """World positions as the scene holds them: float32, relative to the mesh's centre."""
@@ -243,10 +247,7 @@ class EditorApp(Panels, PointerTools, FileActions):
                 "/mesh/preview", self.local32(V[:3]), np.array([[0, 1, 2]], np.uint32),
                 color=SHADED_COLOR, side="double", visible=False)
             self._proxy_of = None
-            self.mesh_node = self.server.scene.add_mesh_simple(
-                "/mesh/shaded", self.local32(V), np.asarray(st.mesh.faces, np.uint32),
-                color=SHADED_COLOR, side="double",
-            )
+            self.mesh_node = None  # made by rebuild_display (below), in the shaded view only
             self.quietly(self._choose_up)
             self.aim_cameras()
             self.active = st.handles[-1].name if st.handles else None
@@ -314,7 +315,10 @@ class EditorApp(Panels, PointerTools, FileActions):
 
     # ---------------------------------------------------------------- mesh display
     def rebuild_display(self) -> None:
-        """Show the mesh in the chosen view: shaded, or split into one node per colour."""
+        """Show the mesh in the chosen view: shaded, or split into one node per colour.
+
+        The view not shown has no node: a hidden node costs viser's copies all the same.
+        """
         for _, node in self._groups:
             node.remove()
         self._groups = []
@@ -337,28 +341,36 @@ class EditorApp(Panels, PointerTools, FileActions):
                 legend = energy_legend_html(vmax, len(colors), floor,
                                             float(np.nanmax(self.vertex_energy, initial=0.0)))
         if labels is None:
-            self.mesh_node.vertices = V32
-            self.mesh_node.visible = True
+            if self.mesh_node is None:
+                self.mesh_node = self.server.scene.add_mesh_simple(
+                    "/mesh/shaded", V32, np.asarray(st.mesh.faces, np.uint32),
+                    color=SHADED_COLOR, side="double")
+            else:
+                self.mesh_node.vertices = V32
+                self.mesh_node.visible = True
         else:
-            self.mesh_node.visible = False
+            if self.mesh_node is not None:
+                self.mesh_node.remove()
+                self.mesh_node = None
             for g in face_groups(st.mesh.faces, labels, len(colors)):
                 node = self.server.scene.add_mesh_simple(
                     f"/mesh/group{g.label}", V32[g.vertices], g.faces,
                     color=colors[g.label], side="double",
                 )
-                self._groups.append((g, node))
+                # the group's faces are not kept: the node has them (0.05 GiB at 1.75M)
+                self._groups.append((g.vertices, node))
         self.html_legend.content = legend
         self.bind_brush()
 
     def _refresh_vertices(self, V: np.ndarray) -> None:
         """Send new positions only (a drag): the colour split stays as it is."""
         V32 = self.local32(V)
-        if not self._groups:
+        if self.mesh_node is not None:
             self.mesh_node.vertices = V32
-        # In a colour view the shaded node is hidden: sending it too doubled every shape
-        # (42 MB instead of 21 at 1.75M vertices); leaving the view sends it once
-        for g, node in self._groups:
-            node.vertices = V32[g.vertices]
+        # a colour view's groups only: the shaded node is made again, with the shape of
+        # then, when the view is left
+        for idx, node in self._groups:
+            node.vertices = V32[idx]
         self._refresh_markers(V32)
 
     def _refresh_markers(self, V32: np.ndarray) -> None:
@@ -390,16 +402,11 @@ class EditorApp(Panels, PointerTools, FileActions):
         if self.proxy_node is None or not self.proxy_node.visible:
             return
         self.proxy_node.visible = False
-        for marker in self._markers.values():
-            marker.visible = True
-        if self._groups:
-            for _, node in self._groups:
-                node.visible = True
-        else:
-            self.mesh_node.visible = True
+        for node in list(self._markers.values()) + self.mesh_nodes():
+            node.visible = True
 
     def mesh_nodes(self) -> list[Any]:
-        """The scene nodes that show the mesh (shaded, and one per colour of a view)."""
+        """The scene nodes that show the mesh: the shaded one, or one per colour of a view."""
         shown = [self.mesh_node] if self.mesh_node is not None else []  # none before start-up
         return shown + [n for _, n in self._groups]
 
