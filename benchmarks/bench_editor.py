@@ -272,7 +272,7 @@ def drag_while_rebuilding(app, sends: list[tuple[int, float]], edit,
         t_next += 1.0 / rate
         time.sleep(max(0.0, t_next - time.perf_counter()))
     t1 = time.perf_counter()
-    deformer = app.worker._engine.deformer  # private: a bench may look inside
+    deformer = app.worker.deformer
     rebuilding = not getattr(deformer, "full_ready", True)
     count = sum(1 for _, t in sends[before:] if t0 <= t <= t1)
     app.drag_handle("cap", *poses[-1], "end")

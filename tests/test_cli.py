@@ -102,7 +102,6 @@ def test_python_dash_m_arapkit_is_the_same_door(tmp_path, bar_file):
 
 
 
-
 def test_version_and_help_with_examples():
     v = arapkit("--version")
     assert v.returncode == 0 and v.stdout.strip() == "arapkit 0.1.0"

@@ -381,6 +381,9 @@ def test_editor_draws_the_proxy_while_dragging_and_the_exact_mesh_after(big, tmp
         for k, phase in enumerate(("start", "update", "update", "end")):
             app.drag_handle("cap", cap.wxyz, start + [0.0, 0.3 * k, 0.0], phase)
         assert app.wait_idle(300)
+        # the worker's solver is the coarse-to-fine one, its full factor built for the release
+        d = app.worker.deformer
+        assert isinstance(d, MultiresDeformer) and d.full_ready
     finally:
         app.stop()
     # while dragging: the proxy drawn, the full mesh hidden; after the release the reverse

@@ -267,6 +267,13 @@ class SolveWorker:
     def has_newer(self) -> bool:
         return self._pending is not None
 
+    @property
+    def deformer(self) -> Any:
+        """The library solver of the current set-up (a :class:`arapkit.Deformer` or a
+        :class:`~arapkit.methods.multires.MultiresDeformer`; None before the first solve):
+        what a bench or a test asks whether its full factor is built."""
+        return self._engine.deformer
+
     # ---------------------------------------------------------------- thread
     def _loop(self) -> None:
         while True:
