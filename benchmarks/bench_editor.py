@@ -153,16 +153,17 @@ class FrameCounter:
     or the preview proxy): what a browser would draw. The client runs in its own process,
     as a browser does: in the editor's process its decoding took the editor's GIL (the
     release at 437K took about 0.25 s longer with it, ``docs/interactive.md``, item 19).
-    ``frames`` holds ``(perf_counter time, bytes, shape)`` as they arrive; ``pid`` is the
-    client's process, which the memory figures leave out.
+    ``frames`` holds ``(perf_counter time, bytes, shape)`` as they arrive. The client's
+    process id goes into ``ignore`` (a :class:`Watch`'s) as soon as it starts, so that the
+    memory figures leave it out.
     """
 
-    def __init__(self, port: int) -> None:
+    def __init__(self, port: int, ignore: set[str]) -> None:
         import subprocess
 
         self.proc = subprocess.Popen([sys.executable, "-c", _CLIENT, str(port)],
                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
-        self.pid = str(self.proc.pid)
+        ignore.add(str(self.proc.pid))
         if self.proc.stdout.readline().strip() != "ready":
             raise RuntimeError("the websocket client did not connect")
         # the child stamps CLOCK_MONOTONIC; the bench's moves are perf_counter times
@@ -335,8 +336,7 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
                 raise RuntimeError("initial solve did not finish")
             t_exact = time.perf_counter() - t_open
             t_first = (first[0] if first else time.perf_counter()) - t_open
-            client = FrameCounter(app.server.get_port())
-            watch.ignore.add(client.pid)
+            client = FrameCounter(app.server.get_port(), watch.ignore)
             time.sleep(0.5)
             sends: list[tuple[int, float]] = []
             errors: list[str] = []
