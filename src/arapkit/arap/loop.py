@@ -180,13 +180,14 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
     el = problem.elimination
     free, cons = el.free, el.constrained
     perm, inv = problem.perm, problem.iperm
-    n = problem.n_vertices
     nf = len(free)
     C = problem.constrained_targets(targets)
     fixed_rhs = np.ascontiguousarray(el.A_fc @ C) if nf else np.zeros((0, 3))
     coupled = problem.energy.coupling is not None
-    R = np.empty((n, 3, 3))
-    R_prev = np.empty((n, 3, 3)) if coupled else np.empty((0, 3, 3))
+    # a rotation per owner: the vertices first, then any of their own (triangles)
+    K = problem.energy.n_owners
+    R = np.empty((K, 3, 3))
+    R_prev = np.empty((K, 3, 3)) if coupled else np.empty((0, 3, 3))
     rhs = np.empty((nf, 3))
     E_prev = None
     t_global = t_local = t_accel = 0.0

@@ -182,7 +182,8 @@ class ARAPProblem:
         perm = bandwidth_order(graph) if reorder and n > 1 else np.arange(n, dtype=np.int64)
         iperm = np.empty(n, dtype=np.int64)
         iperm[perm] = np.arange(n)
-        inner = graph.permuted(perm, iperm, faces=energy_info(energy).needs_faces)
+        inner = graph.permuted(perm, iperm,
+                               faces=energy_info(energy).faces_needed(energy_options))
         setup_ms = 1e3 * (time.perf_counter() - t0)
         h, extra, notes = cls._constraints(graph, handles, free_components)
         rings = check_rings(rings, n)
@@ -229,8 +230,9 @@ class ARAPProblem:
             raise InputError(f"energy '{self.energy.name}' has no rigidity map")
         t0 = time.perf_counter()
         r = check_rings(rings, self.n_vertices)
+        # the energy's own options (a ring scale) hold for the new map too
         en = make_energy("rring", self.graph, self.w, self.weights_kind, rings=r,
-                         perm=self.perm)
+                         perm=self.perm, **self.energy.options)
         return self.with_energy(en, 1e3 * (time.perf_counter() - t0))
 
     # -- derived data ------------------------------------------------------------------

@@ -38,6 +38,7 @@ import numpy as np
 from ..arap.backends import DEVICES, check_device, make_backend  # noqa: F401 - DEVICES: what device= takes
 from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
 from ..arap.energies import energy_info
+from ..arap.energies.rring import check_ring_scale
 from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
 from ..arap.graph import bandwidth_order, unit_scale
 from ..arap.loop import Result, local_global
@@ -210,6 +211,15 @@ class Deformer:
         rotation is coupled to all its neighbours' (``docs/methods.md``).
     nodes : int, optional
         Embedded deformation's graph size (default 200, at most the vertex count).
+    ring_scale : float
+        r is counted in the rings of a mesh whose edges are ``ring_scale`` times this
+        one's (default 1: this mesh's own). A decimated copy of a mesh, solved with the
+        original's rigidity map and ``ring_scale = h_original / h_copy`` (mean edge
+        lengths), is as stiff as the original: it searches ``max(1, rint(r s))`` rings,
+        and where one of its rings is already stiffer than r rings of the original
+        (``r s < 1``) it blends in a rotation per triangle
+        (:mod:`arapkit.arap.energies.rring`). Coarse to fine sets it for its proxy.
+        ``energy="rring"`` only; the CPU device only below 1.
     tol : float
         Stop when ``|E_{t-1} - E_t| / |E_{t-1}| < tol`` (the paper's test, gamma = 1e-3).
     max_iter : int
@@ -248,8 +258,7 @@ class Deformer:
         that is its own proxy).
     levels : sequence of int, optional
         With coarse to fine: the sizes of the intermediate meshes the exact solve passes
-        through (default: one of 100,000 vertices for meshes of 300,000 to 800,000;
-        ``()`` for none; see :func:`arapkit.methods.multires.level_sizes`).
+        through (default: none; see :class:`arapkit.methods.multires.MultiresDeformer`).
     volumetric : bool
         Fill the closed surface with tetrahedra and solve r-ring ARAP on the volume's edge
         graph (the course report's "inner edges"); the result is still the surface's. This
@@ -323,6 +332,7 @@ class Deformer:
         sr_alpha: float | None = None,
         sr_roi=None,
         nodes: int | None = None,
+        ring_scale: float = 1.0,
         tol: float = 1e-3,
         max_iter: int = 1000,
         init: str = "identity",
@@ -335,6 +345,11 @@ class Deformer:
         self.device = check_device(device)
         options = check_method(energy, sr_alpha, nodes, sr_roi)
         info = method(energy)
+        self.ring_scale = check_ring_scale(ring_scale)
+        if self.ring_scale != 1.0:
+            if not info.rigidity_map:
+                raise InputError(f"ring_scale: energy '{energy}' has no rigidity map")
+            options["ring_scale"] = self.ring_scale
         mesh = self.__dict__.pop("_checked_mesh", None) or as_mesh(mesh)
         self.mesh = mesh
         self.energy = energy
@@ -409,7 +424,7 @@ class Deformer:
         """
         if self.energy_is_sum_of_squares:
             return []
-        R = np.empty((self.mesh.n_vertices, 3, 3))
+        R = np.empty((self.problem.energy.n_owners, 3, 3))
         R_prev = np.tile(np.eye(3), (len(R), 1, 1))
         E_rest = self.backend.local(self.problem.vertices.copy(), R, R_prev)
         if E_rest >= -1e-9 * abs(self.backend.rest_term):

@@ -24,11 +24,12 @@ import numba as nb
 import numpy as np
 
 from ..problem import ARAPProblem
-from ..rotations import fit_rotation_range
+from ..rotations import fit_rotation_range, fit_rotations
 
 __all__ = ["CPUBackend"]
 
 _NO_INT = np.zeros(0, dtype=np.int64)
+_NO_INT32 = np.zeros(0, dtype=np.int32)
 _NO_FLOAT = np.zeros(0)
 _NO_ROT = np.zeros((0, 3, 3))
 
@@ -43,7 +44,7 @@ _BLOCK = 512
 
 @nb.njit(parallel=True, cache=True, nogil=True)
 def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w, R, buf,
-               win_lo, win_off, partial, rc_ptr, rc_idx, rc_w, R_prev):
+               win_lo, win_off, partial, rc_ptr, rc_idx, rc_w, R_prev, centres):
     """Fused local step: covariances, rotations and the scatter of the next right-hand side.
 
     Per chunk of consecutive k (one parallel region per iteration: on a shared machine
@@ -65,9 +66,12 @@ def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w
     to the bit. ``partial[c] = (sum tr(R_k S_k), quadratic term)`` for chunk c.
 
     A rotation coupling (SR-ARAP) adds ``sum_j rc_w R_prev[j]^T`` to ``S_k``; energies
-    without one pass an empty ``rc_ptr`` and skip it.
+    without one pass an empty ``rc_ptr`` and skip it. An owner past the vertices
+    (``k >= n``: a triangle's rotation) is centred on ``centres[k - n]`` and has no row of
+    the Laplacian.
     """
     coupled = rc_ptr.shape[0] > 0
+    nv = P.shape[0]
     for c in nb.prange(chunk_ptr.shape[0] - 1):
         S = np.empty((_BLOCK, 3, 3))
         Rb = np.empty((_BLOCK, 3, 3))
@@ -82,7 +86,8 @@ def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w
             b1 = min(b0 + _BLOCK, chunk_ptr[c + 1])
             for k in range(b0, b1):
                 s00 = s01 = s02 = s10 = s11 = s12 = s20 = s21 = s22 = 0.0
-                px, py, pz = P[k, 0], P[k, 1], P[k, 2]
+                o = k if k < nv else centres[k - nv]
+                px, py, pz = P[o, 0], P[o, 1], P[o, 2]
                 for t in range(disk_ptr[k], disk_ptr[k + 1]):
                     v = disk_idx[t]
                     dx, dy, dz = P[v, 0] - px, P[v, 1] - py, P[v, 2] - pz
@@ -96,7 +101,7 @@ def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w
                     s20 += c2 * dx
                     s21 += c2 * dy
                     s22 += c2 * dz
-                for t in range(up_ptr[k], up_ptr[k + 1]):
+                for t in range(up_ptr[min(k, nv)], up_ptr[min(k + 1, nv)]):
                     j = up_idx[t]
                     dx, dy, dz = P[j, 0] - px, P[j, 1] - py, P[j, 2] - pz
                     quad += up_w[t] * (dx * dx + dy * dy + dz * dz)
@@ -138,9 +143,14 @@ def local_step(P, chunk_ptr, disk_ptr, disk_idx, disk_coef, up_ptr, up_idx, up_w
 # costs a scheduler time slice whenever another process holds one of the cores.
 @nb.njit(cache=True, nogil=True)
 def gather_rhs(buf, win_lo, win_off, chunk_ptr, cover_ptr, cover_idx, slot, fixed_rhs, rhs):
-    """``rhs[slot[v]] = b_v - (A_fc C)_v`` for free v, summing the windows that cover v."""
+    """``rhs[slot[v]] = b_v - (A_fc C)_v`` for free v, summing the windows that cover v.
+
+    The chunks' owner ranges run over the vertices first: the vertices of chunk c are its
+    range's part below n (owners past the vertices have no right-hand side of their own).
+    """
+    nv = slot.shape[0]
     for c in range(chunk_ptr.shape[0] - 1):
-        for v in range(chunk_ptr[c], chunk_ptr[c + 1]):
+        for v in range(chunk_ptr[c], min(chunk_ptr[c + 1], nv)):
             s = slot[v]
             if s < 0:
                 continue
@@ -261,9 +271,10 @@ class CPUBackend:
         else:
             self.rc_ptr, self.rc_idx, self.rc_w = _NO_INT, _NO_INT, _NO_FLOAT
         self.entry_w = _NO_FLOAT if en.entry_w is None else en.entry_w
+        self.centres = _NO_INT32 if en.centres is None else en.centres
         self.rest_term = en.rest_term
         self.nonneg = bool((problem.w >= 0).all())
-        self._make_chunks(nbh, n)
+        self._make_chunks(nbh, en.n_owners)
         self.slot = _NO_INT
 
     def bind(self, problem: ARAPProblem) -> CPUBackend:
@@ -274,7 +285,8 @@ class CPUBackend:
         return self
 
     def _make_chunks(self, nbh, n: int) -> None:
-        """Split k into chunks of equal work and give each a private scatter window."""
+        """Split the ``n`` owners k into chunks of equal work and give each a private
+        scatter window."""
         threads = nb.get_num_threads()
         work = np.diff(nbh.disk_ptr) + 16  # + the rotation fit
         cum = np.concatenate([[0], np.cumsum(work)])
@@ -311,7 +323,7 @@ class CPUBackend:
         local_step(P, self.chunk_ptr, nbh.disk_ptr, nbh.disk_idx, nbh.disk_coef,
                    self.up_ptr, self.up_idx, self.up_w, R, self.buf,
                    self.win_lo, self.win_off, self.partial,
-                   self.rc_ptr, self.rc_idx, self.rc_w, R_prev)
+                   self.rc_ptr, self.rc_idx, self.rc_w, R_prev, self.centres)
         tr, quad = self.partial.sum(axis=0)
         E = float(quad + self.rest_term - 2.0 * tr)
         # with weights >= 0, E is a sum of squares: a negative value is the round-off of
@@ -345,14 +357,35 @@ class CPUBackend:
         """Each vertex's term of the energy (internal numbering).
 
         With a rotation coupling, vertex k's term includes ``sum_j c_kj |R_k - R_j|^2``.
+        An owner past the vertices (a triangle) shares its term evenly among the vertices
+        it touches; given the vertices' rotations only, its own are fitted to P.
         """
         p = self.problem
         nbh = p.energy.nbh
-        out = np.empty(len(P))
+        n, K = len(P), p.energy.n_owners
+        if len(R) < K:
+            R = np.concatenate([R, self._extra_rotations(P)])
+        out = np.empty(K)
         neighbourhood_energies(P, p.vertices, p.edges, p.w, nbh.edge_ptr, nbh.edge_idx,
                                self.entry_w, R, out)
         if len(self.rc_ptr):
-            k = np.repeat(np.arange(len(P)), np.diff(self.rc_ptr))
+            k = np.repeat(np.arange(n), np.diff(self.rc_ptr))
             d = ((R[k] - R[self.rc_idx]) ** 2).sum(axis=(1, 2))
-            out += np.bincount(k, self.rc_w * d, len(P))
+            out[:n] += np.bincount(k, self.rc_w * d, n)
+        if K > n:
+            sizes = np.diff(nbh.disk_ptr[n:])
+            share = np.repeat(out[n:] / np.maximum(sizes, 1), sizes)
+            out = out[:n] + np.bincount(nbh.disk_idx[nbh.disk_ptr[n]:], share, n)
         return out
+
+    def _extra_rotations(self, P: np.ndarray) -> np.ndarray:
+        """The best rotations of the owners past the vertices for positions P."""
+        nbh = self.problem.energy.nbh
+        n = len(P)
+        lo = nbh.disk_ptr[n]
+        sizes = np.diff(nbh.disk_ptr[n:])
+        owner = np.repeat(np.arange(len(sizes)), sizes)
+        d = P[nbh.disk_idx[lo:]] - P[self.centres[owner]]
+        S = np.zeros((len(sizes), 3, 3))
+        np.add.at(S, owner, nbh.disk_coef[lo:, :, None] * d[:, None, :])
+        return fit_rotations(S)

@@ -232,6 +232,10 @@ class TorchSystem:
         en = problem.energy
         nbh = en.nbh
         n = problem.n_vertices
+        if en.n_owners != n:
+            raise InputError(f"{problem.name}: the torch backend fits one rotation per vertex; "
+                             "this energy has rotations of its own past them (a ring scale "
+                             "below 1): use device='cpu'")
         self.n = n
 
         def t(a, dt=None):

@@ -13,7 +13,11 @@ with a neighbourhood ``N(k)`` of edges for every vertex k and a weight ``w_ke`` 
 * the value ``sum_e D_e |e'|^2 + sum_e D_e |e|^2 - 2 sum_k tr(R_k S_k)``.
 
 An energy is therefore data (:class:`NeighbourhoodEnergy`), not code: a backend runs the
-same kernels for all of them. ``C(R)`` is an optional coupling between neighbouring
+same kernels for all of them. The rotations' owners k are the vertices, and may go on past
+them: an owner ``k >= n`` is a rotation of its own (a triangle's, in the blended energy of
+a coarse mesh, :mod:`arapkit.arap.energies.rring`), centred on a vertex it touches.
+
+``C(R)`` is an optional coupling between neighbouring
 rotations, ``sum_k sum_j c_kj |R_k - R_j|_F^2`` (SR-ARAP), which adds ``c_kj R_j^T`` to
 ``S_k`` (with the neighbours' previous rotations) and a constant to the value.
 
@@ -38,7 +42,7 @@ from ..rings import Neighbourhoods
 if TYPE_CHECKING:
     from ..graph import EdgeGraph
 
-__all__ = ["NeighbourhoodEnergy", "energy_from_entries", "rest_term"]
+__all__ = ["NeighbourhoodEnergy", "energy_from_entries", "owner_rows", "rest_term"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -60,7 +64,11 @@ class NeighbourhoodEnergy:
     coupling : (ptr, idx, coef) or None
         ``c_kj`` of the rotation coupling in CSR form.
     options : dict
-        The energy's parameters, for reports.
+        The energy's parameters, for reports; an energy rebuilt for a new rigidity map
+        keeps them (:meth:`arapkit.arap.problem.ARAPProblem.with_rings`).
+    centres : (K - n,) int32 or None
+        Where the owners past the vertices have rotations of their own (``nbh``'s rows
+        n ... K-1): the vertex each is centred on. None: one rotation per vertex.
     """
 
     name: str
@@ -70,11 +78,17 @@ class NeighbourhoodEnergy:
     rest_term: float
     coupling: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     options: dict[str, Any] = field(default_factory=dict)
+    centres: np.ndarray | None = None
 
     @property
     def rings(self) -> np.ndarray:
         """r per vertex (internal numbering); 1 for the non-r-ring energies."""
         return self.nbh.rings
+
+    @property
+    def n_owners(self) -> int:
+        """K, the number of rotations: the vertices, and the owners past them."""
+        return len(self.nbh.disk_ptr) - 1
 
 
 @nb.njit(parallel=True, cache=True, nogil=True)
@@ -90,6 +104,42 @@ def _weighted_edge_norms(P, edges, dw):
 def rest_term(graph: EdgeGraph, system_w: np.ndarray) -> float:
     """``sum_e D_e |e|^2`` at rest."""
     return float(_weighted_edge_norms(graph.vertices, graph.edges, system_w))
+
+
+def owner_rows(P: np.ndarray, E: np.ndarray, n_owners: int, k: np.ndarray, e: np.ndarray,
+               w_ke: np.ndarray) -> tuple[np.ndarray, ...]:
+    """CSR rows of ``n_owners`` neighbourhoods from their (k, e, w_ke) triplets.
+
+    Repeated (k, e) pairs are summed. Returns ``edge_ptr, edge_idx, w, disk_ptr, disk_idx,
+    disk_coef`` (see :class:`arapkit.arap.rings.Neighbourhoods`), ``w`` being each entry's
+    weight; a disk lists its vertices in increasing order.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rows = owner_rows(np.eye(3), np.array([[0, 1], [1, 2]]), 1, np.array([0, 0]),
+    ...                   np.array([0, 1]), np.ones(2))
+    >>> rows[4].tolist(), rows[5][:, 0].tolist()  # disk of owner 0: c_0v, x components
+    ([0, 1, 2], [1.0, -1.0, 0.0])
+    """
+    n, m = len(P), len(E)
+    key, inv = np.unique(k.astype(np.int64) * m + e, return_inverse=True)
+    wk = np.bincount(inv.ravel(), w_ke, len(key))
+    kk, ee = key // m, key % m
+    edge_ptr = np.zeros(n_owners + 1, dtype=np.int64)
+    np.cumsum(np.bincount(kk, minlength=n_owners), out=edge_ptr[1:])
+    # disks: each entry touches both ends of its edge with opposite signs
+    d = wk[:, None] * (P[E[ee, 0]] - P[E[ee, 1]])
+    dk = np.concatenate([kk, kk])
+    dv = np.concatenate([E[ee, 0], E[ee, 1]])
+    dkey, dinv = np.unique(dk * n + dv, return_inverse=True)
+    dinv = dinv.ravel()
+    coef = np.stack([np.bincount(dinv, np.concatenate([d[:, a], -d[:, a]]), len(dkey))
+                     for a in range(3)], axis=1)
+    disk_ptr = np.zeros(n_owners + 1, dtype=np.int64)
+    np.cumsum(np.bincount(dkey // n, minlength=n_owners), out=disk_ptr[1:])
+    return (edge_ptr, ee.astype(np.int32), wk, disk_ptr, (dkey % n).astype(np.int32),
+            np.ascontiguousarray(coef))
 
 
 def energy_from_entries(name: str, graph: EdgeGraph, k: np.ndarray, e: np.ndarray,
@@ -108,26 +158,11 @@ def energy_from_entries(name: str, graph: EdgeGraph, k: np.ndarray, e: np.ndarra
     """
     n, E, P = graph.n_vertices, graph.edges, graph.vertices
     m = len(E)
-    key, inv = np.unique(k.astype(np.int64) * m + e, return_inverse=True)
-    wk = np.bincount(inv.ravel(), w_ke, len(key))
-    kk, ee = key // m, key % m
-    edge_ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(kk, minlength=n), out=edge_ptr[1:])
-    # disks: each entry touches both ends of its edge with opposite signs
-    d = wk[:, None] * (P[E[ee, 0]] - P[E[ee, 1]])
-    dk = np.concatenate([kk, kk])
-    dv = np.concatenate([E[ee, 0], E[ee, 1]])
-    dkey, dinv = np.unique(dk * n + dv, return_inverse=True)
-    dinv = dinv.ravel()
-    coef = np.stack([np.bincount(dinv, np.concatenate([d[:, a], -d[:, a]]), len(dkey))
-                     for a in range(3)], axis=1)
-    disk_ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(dkey // n, minlength=n), out=disk_ptr[1:])
+    edge_ptr, ee, wk, disk_ptr, disk_idx, coef = owner_rows(P, E, n, k, e, w_ke)
     system_w = np.bincount(ee, wk, m)
     nbh = Neighbourhoods(
-        rings=np.ones(n, dtype=np.int32), edge_ptr=edge_ptr, edge_idx=ee.astype(np.int32),
+        rings=np.ones(n, dtype=np.int32), edge_ptr=edge_ptr, edge_idx=ee,
         edge_layer=np.ones(len(ee), dtype=np.int8), disk_ptr=disk_ptr,
-        disk_idx=(dkey % n).astype(np.int32), disk_coef=np.ascontiguousarray(coef),
-        edge_count=np.bincount(ee, minlength=m),
+        disk_idx=disk_idx, disk_coef=coef, edge_count=np.bincount(ee, minlength=m),
     )
     return NeighbourhoodEnergy(name, nbh, wk, system_w, rest_term(graph, system_w), **kw)

@@ -45,8 +45,9 @@ class EnergyInfo:
         energy never rises (and Anderson acceleration's energy safeguard applies).
     rigidity_map : bool
         Takes r per vertex.
-    needs_faces : bool
-        Defined on triangles (refused on a plain edge graph).
+    needs_faces : bool or callable(options) -> bool
+        Defined on triangles (refused on a plain edge graph); a callable says so for the
+        given options (r-ring ARAP reads triangles only with a ring scale below 1).
     options : tuple of str
         The builder's keyword options.
     """
@@ -55,8 +56,13 @@ class EnergyInfo:
     build: Callable[..., NeighbourhoodEnergy]
     descent: bool = True
     rigidity_map: bool = False
-    needs_faces: bool = False
+    needs_faces: bool | Callable[[dict], bool] = False
     options: tuple[str, ...] = ()
+
+    def faces_needed(self, options: dict) -> bool:
+        """Whether the energy, with these options, reads the triangles."""
+        return bool(self.needs_faces(options) if callable(self.needs_faces)
+                    else self.needs_faces)
 
 
 _ENERGIES: dict[str, EnergyInfo] = {}
@@ -106,6 +112,6 @@ def make_energy(name: str, graph: EdgeGraph, w: np.ndarray, weights_kind: str | 
         r = r if perm is None else r[perm]
     elif not np.all(np.asarray(rings) == 1):
         raise InputError(f"energy '{name}' has no rigidity map (rings must be 1)")
-    if info.needs_faces and graph.faces is None:
+    if info.faces_needed(options) and graph.faces is None:
         raise InputError(f"{graph.name}: energy '{name}' needs a triangle mesh")
     return info.build(graph, w, weights_kind, r, perm, **options)
