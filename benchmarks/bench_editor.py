@@ -31,8 +31,11 @@ then also reports:
 * ``upd/s``: shapes handed to viser per second while dragging, and ``client upd/s`` /
   ``MB/s``: frames carrying a mesh update that reached a websocket client (what a browser
   receives);
-* ``prev max/p95``: the last preview against the exact result for the same targets, as
-  fractions of the bounding-box diagonal;
+* ``prev max/p95``: the last preview (the settled one) against the exact result for the
+  same targets, as fractions of the bounding-box diagonal;
+* ``mid-drag shape vs its exact``: the proxy shape the page showed halfway through the drag
+  against the exact solve for the targets it was computed for (solved after the drag),
+  by displacement at each proxy vertex's full vertex: what a person sees while dragging;
 * ``release s``: from the drag's release to the exact result sent;
 * ``handle s``: from adding a handle to the first shape that obeys it, and ``repaint s``
   from a brush stroke's end in the r view (whose coloured display is rebuilt) to the
@@ -343,6 +346,11 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
             # only the last preview is kept: holding every update (a full shape each, 42 MB
             # at 1.75M vertices) would count the bench's own memory as the editor's
             last_preview: list = []
+            # what the page draws while dragging (the proxy's shape) and the targets of the
+            # last few moves, to measure one shown mid-drag against its own exact solve
+            last_live: list = []
+            recent: dict[int, np.ndarray] = {}
+            shown_mid: list = []
             sent = threading.Event()
 
             def hook(u, t: float) -> None:
@@ -352,6 +360,8 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
                     sends.append((u.seq, t))
                     if u.proxy_vertices is not None and u.vertices is not None:
                         last_preview[:] = [u]
+                    if u.proxy_vertices is not None:
+                        last_live[:] = [u]
                 sent.set()
 
             app.sent_hooks.append(hook)
@@ -364,6 +374,9 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
                 t = time.perf_counter()
                 seq = app.drag_handle("cap", wxyz, pos, phase)
                 moves.append((seq, t))
+                recent[seq] = st.constraints()[1]
+                for old in [s for s in recent if s < seq - 3]:
+                    del recent[old]
                 if errors:
                     raise RuntimeError(f"solver failed: {errors[0]}")
                 if mode == "sequential":
@@ -373,6 +386,9 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
                 else:
                     t_next += 1.0 / rate
                     time.sleep(max(0.0, t_next - time.perf_counter()))
+                if k == steps // 2 and last_live and last_live[0].seq in recent:
+                    u = last_live[0]  # what the page shows as the next move comes
+                    shown_mid[:] = [(u.proxy_vertices, recent[u.seq])]
             t_release = moves[-1][1]
             app.wait_idle(1800)
             t_done = time.perf_counter()
@@ -399,6 +415,16 @@ def run_drag(mesh, r: int, steps: int, rate: float, mode: str,
             if last_preview and final is not None and final.proxy_vertices is None:
                 e = np.linalg.norm(last_preview[0].vertices - final.vertices, axis=1) / diag
                 out["prev_max"], out["prev_p95"] = float(e.max()), float(np.percentile(e, 95))
+            d = app.worker.deformer
+            if shown_mid and hasattr(d, "binding"):
+                # the proxy shown mid-drag against the exact solve for its own targets, by
+                # displacement at each proxy vertex's full vertex (the decimation's own
+                # offset taken out)
+                Y, T = shown_mid[0]
+                X = d.solve(T).vertices
+                nf, Q, V0 = d.binding.near_full, d.proxy_mesh.vertices, d.mesh.vertices
+                e = np.linalg.norm((Y - Q) - (X[nf] - V0[nf]), axis=1) / diag
+                out["drag_max"], out["drag_p95"] = float(e.max()), float(np.percentile(e, 95))
             # a new handle (a vertex at the middle height, held where it is), then a
             # brush stroke in the r view, each the way its button or stroke does it
             y = st.vertices[:, 1]
@@ -504,7 +530,9 @@ def main(argv: list[str] | None = None) -> int:
                   f"{s['release_s']:.2f} s · new handle -> shape {s['handle_s']:.2f} s · "
                   f"repaint (r view) -> shape {s['repaint_s']:.2f} s · "
                   f"preview vs exact max {s.get('prev_max', float('nan')):.4f} p95 "
-                  f"{s.get('prev_p95', float('nan')):.4f} of diag · peak "
+                  f"{s.get('prev_p95', float('nan')):.4f} of diag · mid-drag shape vs its "
+                  f"exact max {s.get('drag_max', float('nan')):.4f} p95 "
+                  f"{s.get('drag_p95', float('nan')):.4f} · peak "
                   f"{s['peak_gib']:.2f} GiB (children {s['child_gib']:.2f}, sampled total "
                   f"{s['total_gib']:.2f}) · longest stall {s['stall_s']:.2f} s · "
                   f"{s['rebuild_rate']:.1f} upd/s sent while the factor is rebuilt"
