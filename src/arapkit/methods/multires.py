@@ -450,8 +450,8 @@ class Binding:
         The rest positions bound (the caller's arrays, not copied).
     near_full : (m,) int64
         The nearest full vertex of each proxy vertex (where the proxy reads r and handles;
-        read by homes instead, a handle vertex far from its home on a subdivision spike
-        pinned a proxy vertex far from the handle).
+        read by homes instead, the 1.75M dragon's proxy had 4,277 handle vertices instead of
+        4,238 and its preview's p95 rose from 1.7 % to 3.8 % of the diagonal).
     covered : (n,) bool or None
         Which full vertices the proxy was made from (None: all); the others are
         :func:`specks`, which only follow their nearest proxy vertices.
