@@ -132,6 +132,22 @@ def test_reported_energy_is_eq1(small_bar, r):
     assert np.allclose(res.rotations, svd_rotations(m, w, rings, res.vertices), atol=1e-8)
 
 
+@pytest.mark.parametrize("r", [1, 2])
+def test_energy_of_is_eq1_at_the_best_rotations_with_the_handles_moved(small_bar, r):
+    """``energy_of``: eq. (1) edge by edge, at numpy's SVD rotations, of the shape with its
+    handles put at their targets."""
+    m, h, t = small_bar
+    d = Deformer(m, h, rings=r)
+    P = m.vertices + 0.05 * np.random.default_rng(0).standard_normal(m.vertices.shape)
+    Q = P.copy()
+    Q[h] = t
+    w = edge_weights(m)
+    rings = np.full(m.n_vertices, r)
+    ref = brute_energy(m, w, rings, Q, svd_rotations(m, w, rings, Q))
+    assert d.energy_of(P, t) == pytest.approx(ref, rel=1e-9)
+    assert d.energy_of(Q, t) == d.energy_of(P, t)
+
+
 @pytest.mark.parametrize("r", [1, 3])
 def test_rigid_motion_of_handles(r):
     m = bar(length=3.0, segments=(15, 2, 2))

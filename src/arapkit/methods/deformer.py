@@ -532,6 +532,33 @@ class Deformer:
         Ri = np.ascontiguousarray(np.asarray(R, dtype=np.float64)[p.perm])
         return self.backend.vertex_energy(Pi, Ri)[p.iperm] * (p.scale * p.scale)
 
+    def energy_of(self, P: np.ndarray, targets) -> float:
+        """The energy of shape ``P`` with its handles moved to ``targets``, at the best
+        rotations: what a :meth:`solve` started from ``P`` begins at.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from arapkit.mesh.shapes import bar
+        >>> m = bar()
+        >>> d = Deformer(m, [0, 1])
+        >>> float(d.energy_of(m.vertices, m.vertices[[0, 1]]))
+        0.0
+        >>> float(d.energy_of(m.vertices, m.vertices[[0, 1]] + [[0, 0, 0], [0, 0, 1]])) > 0
+        True
+        """
+        p = self._local_global("energy_of")
+        T = check_targets(self.handles, targets)
+        self.prepare()
+        s = p.scale
+        X = np.asarray(P, dtype=np.float64)[p.perm] / s
+        X[p.elimination.constrained] = p.constrained_targets(T / s)
+        R = np.empty((p.energy.n_owners, 3, 3))
+        # a coupled energy's first local step reads identity rotations, as the solve's does
+        R_prev = np.tile(np.eye(3), (len(R), 1, 1)) if p.energy.coupling is not None else None
+        E = self.backend.local(X, R) if R_prev is None else self.backend.local(X, R, R_prev)
+        return float(E * s * s)
+
     def _initial_positions(self, targets: np.ndarray, init) -> np.ndarray | None:
         if init is not None and not isinstance(init, str):
             # a float64 array is not copied: the solve only reads it (a shape is 40 MB at
