@@ -534,7 +534,9 @@ class Deformer:
 
     def energy_of(self, P: np.ndarray, targets) -> float:
         """The energy of shape ``P`` with its handles moved to ``targets``, at the best
-        rotations: what a :meth:`solve` started from ``P`` begins at.
+        rotations: what a :meth:`solve` started from ``P`` begins at (unless the targets
+        are one rigid motion of the handles' rest positions: that solve starts from the
+        motion of the rest shape instead).
 
         Examples
         --------
@@ -555,9 +557,9 @@ class Deformer:
         X[p.elimination.constrained] = p.constrained_targets(T / s)
         R = np.empty((p.energy.n_owners, 3, 3))
         # a coupled energy's first local step reads identity rotations, as the solve's does
-        R_prev = np.tile(np.eye(3), (len(R), 1, 1)) if p.energy.coupling is not None else None
-        E = self.backend.local(X, R) if R_prev is None else self.backend.local(X, R, R_prev)
-        return float(E * s * s)
+        coupled = p.energy.coupling is not None
+        R_prev = np.tile(np.eye(3), (len(R), 1, 1)) if coupled else np.empty((0, 3, 3))
+        return float(self.backend.local(X, R, R_prev) * s * s)
 
     def _initial_positions(self, targets: np.ndarray, init) -> np.ndarray | None:
         if init is not None and not isinstance(init, str):
