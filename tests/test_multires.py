@@ -307,6 +307,7 @@ def test_a_release_with_the_factor_ready_previews_the_exact_solves_own_start(
 
         kind = Leveled
         monkeypatch.setattr(worker_module, "MultiresDeformer", Leveled)
+    monkeypatch.setattr(worker_module, "PROGRESS_EVERY_S", 0.0)  # report every iteration
     V = mesh.vertices
     updates, seqs, s = _run_worker(mesh, h, [
         (V[h] + (t - V[h]) / 3, False),  # an exact solve: the full factor is built after it
@@ -325,6 +326,11 @@ def test_a_release_with_the_factor_ready_previews_the_exact_solves_own_start(
     np.testing.assert_array_equal(first.vertices, start)
     assert final.proxy_vertices is None
     assert np.abs(final.vertices - want.vertices).max() < 1e-9 * _diag(mesh)
+    # between them the exact solve's progress: its count and energy, without a shape
+    progress = mine[1:-1]
+    assert all(u.vertices is None and u.proxy_vertices is None for u in progress)
+    assert [u.iterations for u in progress] == list(range(1, final.iterations + 1))
+    np.testing.assert_allclose([u.energy for u in progress], want.history, rtol=1e-12)
 
 
 def test_a_coarse_start_stopped_by_its_callback_stops_the_proxy():
@@ -363,7 +369,8 @@ def test_dragon_converges_within_60_plain_iterations_from_the_proxy():
     assert res.energy <= plain.energy * (1 + 1e-3)
 
 
-def test_editor_draws_the_proxy_while_dragging_and_the_exact_mesh_after(big, tmp_path):
+def test_editor_draws_the_proxy_while_dragging_and_the_exact_mesh_after(big, tmp_path,
+                                                                         monkeypatch):
     pytest.importorskip("viser", reason="the editor extra is needed")
     from arapkit.editor.app import EditorApp
     from arapkit.editor.state import EditorState
@@ -375,6 +382,7 @@ def test_editor_draws_the_proxy_while_dragging_and_the_exact_mesh_after(big, tmp
     x = mesh.vertices[:, 0]
     st.add_handle(np.flatnonzero(x < x.min() + 0.1), name="base", frozen=True)
     cap = st.add_handle(np.flatnonzero(x > x.max() - 0.1), name="cap")
+    monkeypatch.setattr("arapkit.editor.worker.PROGRESS_EVERY_S", 0.0)
     app = EditorApp(st, port=free_port(), export_dir=tmp_path)
     try:
         assert app.wait_idle(300)
@@ -391,9 +399,12 @@ def test_editor_draws_the_proxy_while_dragging_and_the_exact_mesh_after(big, tmp
         assert isinstance(d, MultiresDeformer) and d.full_ready
     finally:
         app.stop()
-    # while dragging: the proxy drawn, the full mesh hidden; after the release the reverse
+    # while dragging: the proxy drawn, the full mesh hidden; after the release the reverse,
+    # the exact solve's progress reports (no shape) leaving the settled preview drawn
     assert (True, True, False) in seen
     assert seen[-1] == (False, False, True)
+    after = seen[max(i for i, x in enumerate(seen) if x[0]) + 1:-1]
+    assert after and set(after) == {(False, True, False)}
     idx, tgt = st.constraints()
     want = Deformer(mesh, idx, multires=True, tol=st.settings.tol,
                     max_iter=st.settings.max_iter).solve(tgt)
@@ -854,6 +865,11 @@ def test_a_preview_follows_new_targets_with_the_plain_proxy_then_the_matched_one
     assert p.proxy.energy == pytest.approx(E, rel=1e-9)
     E_plain = d._stiff.vertex_energy(p.proxy.vertices, p.proxy.rotations).sum()
     assert abs(E_plain - E) > 0.01 * E
+    # the same pose again, in a new array: the matched proxy goes on from its shape (the
+    # plain one converged for these targets already)
+    again = d.preview(T.copy(), max_iter=1).proxy
+    want = d.proxy.solve(PT, init=p.proxy.vertices, max_iter=1, tol=1e-4)
+    assert np.array_equal(again.vertices, want.vertices)
 
 
 def _steps(d, T, max_iter):

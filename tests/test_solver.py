@@ -252,6 +252,37 @@ def test_callback_stops():
     assert seen == res.history
 
 
+@pytest.mark.parametrize("energy", ["rring", "embedded"])
+def test_progress_sees_each_energy_and_stops_without_copying_the_shape(energy, monkeypatch):
+    # progress(iteration, energy): the same energies as the history, the same solve as
+    # without it (bitwise), True ends it; the r-ring loop never gathers the shape for it
+    from arapkit.arap.backends.cpu import CPUBackend
+
+    m = bar()
+    h, t = bar_bend(m, 120)
+    d = Deformer(m, h, energy=energy)
+    plain = d.solve(t, max_iter=30)
+    if energy == "rring":
+        def refuse(*_):
+            raise AssertionError("the shape was gathered for progress alone")
+
+        monkeypatch.setattr(CPUBackend, "gather", staticmethod(refuse))
+    seen = []
+    res = d.solve(t, max_iter=30, progress=lambda i, e: seen.append((i, e)) and False)
+    assert seen == list(enumerate(res.history, start=1))
+    assert res.history == plain.history
+    np.testing.assert_array_equal(res.vertices, plain.vertices)
+    cut = d.solve(t, progress=lambda i, e: i >= 3)
+    assert cut.iterations == 3 and not cut.converged and cut.history == plain.history[:3]
+    monkeypatch.undo()
+    # with a callback too: the callback first, and its stop ends the solve before progress
+    calls = []
+    both = d.solve(t, callback=lambda i, e, P: calls.append(("cb", i)) or i >= 2,
+                   progress=lambda i, e: calls.append(("progress", i)) and False)
+    assert both.iterations == 2
+    assert calls == [("cb", 1), ("progress", 1), ("cb", 2)]
+
+
 @pytest.mark.parametrize("device", ["cpu", "torch-cpu"])
 def test_callback_sees_each_iterations_positions_in_the_callers_units(device):
     # a mesh far from unit size (the solver works in units of a power of two) and in the

@@ -19,7 +19,8 @@ from ..validate import iteration_cap, tolerance
 from .accel import Anderson
 from .constraints import rigid_motion
 
-__all__ = ["ROUNDOFF_ULPS", "Result", "energy_floor", "local_global", "rigid_start"]
+__all__ = ["ROUNDOFF_ULPS", "Result", "energy_floor", "local_global", "rigid_start",
+           "with_progress"]
 
 #: energies within this many ulps of the rest term are round-off (see :func:`energy_floor`)
 ROUNDOFF_ULPS = 1024
@@ -128,9 +129,33 @@ def rigid_start(problem, targets: np.ndarray) -> np.ndarray | None:
     return rest @ R.T + t
 
 
+def with_progress(callback, progress):
+    """One ``callback(iteration, energy, vertices)`` that also asks ``progress(iteration,
+    energy)``, for a solver loop that takes only a callback (either may be None).
+
+    Examples
+    --------
+    >>> seen = []
+    >>> cb = with_progress(None, lambda it, E: seen.append((it, E)) or it >= 2)
+    >>> cb(1, 0.5, None), cb(2, 0.25, None), seen
+    (False, True, [(1, 0.5), (2, 0.25)])
+    >>> with_progress(None, None) is None
+    True
+    """
+    if progress is None:
+        return callback
+
+    def both(iteration: int, energy: float, vertices: np.ndarray) -> bool:
+        if callback is not None and callback(iteration, energy, vertices):
+            return True  # as in local_global: a stopping callback ends it before progress
+        return bool(progress(iteration, energy))
+
+    return both
+
+
 def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None, *,
                  tol: float, max_iter: int, callback=None, accelerate: bool = False,
-                 history: int = 5) -> Result:
+                 history: int = 5, progress=None) -> Result:
     """Run the local/global iteration on a bound backend.
 
     Parameters
@@ -140,7 +165,7 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
     targets : (h, 3) checked handle targets.
     start : (n, 3) start positions in the caller's numbering, or None for the rest shape
         with identity rotations (the paper).
-    tol, max_iter, callback, accelerate, history :
+    tol, max_iter, callback, accelerate, history, progress :
         As for :meth:`arapkit.Deformer.solve`.
 
     Positions cross this boundary in the caller's units and are divided by
@@ -267,6 +292,8 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         plain_next = small and accelerated
         E_prev = E
         if callback is not None and callback(it, E * s2, backend.gather(P, inv, s)):
+            break
+        if progress is not None and progress(it, E * s2):
             break
         if converged:
             break

@@ -529,6 +529,8 @@ class EditorApp(Panels, PointerTools, FileActions):
                 self.vertex_energy = u.vertex_energy
             if u.proxy_vertices is not None:
                 self._show_proxy(u.proxy_mesh, u.proxy_vertices)
+            elif u.vertices is None and not u.final:
+                pass  # progress of an exact solve: the shape shown stays, the status moves
             else:
                 self._hide_proxy()
                 if u.final and self.dd_view.value == "Energy" and u.vertex_energy is not None:

@@ -811,8 +811,9 @@ class MultiresDeformer:
         #: the last two moves a preview saw: their proxy targets, and the shape the older one
         #: ended at (see :meth:`_lead_start`)
         self._moves: tuple[np.ndarray | None, np.ndarray, np.ndarray | None] | None = None
-        #: the targets the preview has brought the plain one-ring proxy to convergence for
-        self._stiff_done_for: np.ndarray | None = None
+        #: the handles' version and targets the preview has brought the plain one-ring proxy
+        #: to convergence for
+        self._stiff_done_for: tuple[int, np.ndarray] | None = None
         self._checked: np.ndarray | None = None
         self._full: Deformer | None = None
         # the handles and r change a version; the full problem records the one it was built
@@ -1258,13 +1259,20 @@ class MultiresDeformer:
         proxy's 6.8 %); once that has converged, the blended proxy takes over from there."""
         PT = self._proxy_targets(T)
         start = self._proxy_shape
-        if self._stiff is not None and self._stiff_done_for is not T:
+        if self._stiff is not None and not self._stiff_done(T):
             stiff = self._stiff.solve(PT, init=start, tol=tol, max_iter=max_iter,
                                       callback=callback)
             if not stiff.converged:
                 return stiff
-            self._stiff_done_for, start = T, stiff.vertices
+            self._stiff_done_for, start = (self._version, T), stiff.vertices
         return self.proxy.solve(PT, init=start, tol=tol, max_iter=max_iter, callback=callback)
+
+    def _stiff_done(self, T: np.ndarray) -> bool:
+        """Whether the plain one-ring proxy has converged for these targets already: equal
+        ones in a new array (a pose submitted again) go on with the blended proxy."""
+        done = self._stiff_done_for
+        return (done is not None and done[0] == self._version
+                and (done[1] is T or np.array_equal(done[1], T)))
 
     def _proxy_from_rest(self, T: np.ndarray, callback=None, tol: float = PROXY_TOL,
                          max_iter: int = PROXY_MAX_ITER) -> Result:
@@ -1324,13 +1332,14 @@ class MultiresDeformer:
 
     def solve(self, targets, init=None, tol: float | None = None,
               max_iter: int | None = None, callback=None,
-              accelerate: bool | None = None) -> Result:
+              accelerate: bool | None = None, progress=None) -> Result:
         """Deform so that the handles reach ``targets``; see :meth:`arapkit.Deformer.solve`.
 
         With ``init=None`` the full solve starts from the skinned proxy solution (coarse to
         fine); an array or ``"identity"``/``"laplacian"`` starts it there instead, as for
         :class:`arapkit.Deformer`. ``timings`` gains ``proxy_s``, ``proxy_iterations``,
-        ``level_s`` and ``level_iterations``.
+        ``level_s`` and ``level_iterations``. ``callback`` and ``progress`` see the full
+        solve's iterations (the proxy's are :meth:`coarse_start`'s).
         """
         t0 = time.perf_counter()
         proxy_its = level_its = 0
@@ -1346,7 +1355,7 @@ class MultiresDeformer:
             init, level_its = self.fine_start(targets, pres)
             t_levels = time.perf_counter() - t1
         res = full.solve(targets, init=init, tol=tol, max_iter=max_iter,
-                         callback=callback, accelerate=accelerate)
+                         callback=callback, accelerate=accelerate, progress=progress)
         res.timings.update(proxy_s=t_proxy, proxy_iterations=proxy_its, level_s=t_levels,
                            level_iterations=level_its, total_s=time.perf_counter() - t0)
         return res
