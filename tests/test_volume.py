@@ -281,6 +281,16 @@ def test_surface_output_keeps_vertex_count_and_faces(thick):
     np.testing.assert_array_equal(res.vertices[h], t)
 
 
+def test_progress_sees_the_volume_solves_energies_and_stops_it(thick):
+    m, tm = thick
+    h, t = bar_bend(m, 60)
+    d = VolumetricDeformer(m, h, tet=tm)
+    full = d.solve(t, max_iter=6, tol=0)
+    seen = []
+    cut = d.solve(t, progress=lambda i, e: seen.append(e) or i >= 4)
+    assert cut.iterations == 4 and seen == full.history[:4] == cut.history
+
+
 def test_open_mesh_is_refused_in_one_line():
     V = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0.0]])
     m = Mesh(V, [[0, 1, 2], [0, 2, 3]], name="square.off")
