@@ -870,6 +870,11 @@ def test_a_preview_follows_new_targets_with_the_plain_proxy_then_the_matched_one
     again = d.preview(T.copy(), max_iter=1).proxy
     want = d.proxy.solve(PT, init=p.proxy.vertices, max_iter=1, tol=1e-4)
     assert np.array_equal(again.vertices, want.vertices)
+    # a rigidity map set again forgets it: the same targets start again on the plain proxy
+    d.set_rings(1)
+    renewed = d.preview(T, max_iter=1).proxy
+    want = d._stiff.solve(d.proxy_targets(T), init=again.vertices, max_iter=1, tol=1e-4)
+    assert np.array_equal(renewed.vertices, want.vertices)
 
 
 def _steps(d, T, max_iter):

@@ -20,7 +20,7 @@ from .accel import Anderson
 from .constraints import rigid_motion
 
 __all__ = ["ROUNDOFF_ULPS", "Result", "energy_floor", "local_global", "rigid_start",
-           "with_progress"]
+           "start_energy", "with_progress"]
 
 #: energies within this many ulps of the rest term are round-off (see :func:`energy_floor`)
 ROUNDOFF_ULPS = 1024
@@ -153,6 +153,37 @@ def with_progress(callback, progress):
     return both
 
 
+def start_energy(problem, backend, start: np.ndarray, units: float, C: np.ndarray,
+                 R: np.ndarray, R_prev: np.ndarray) -> tuple[np.ndarray, float]:
+    """A solve's start: ``start / units`` in the problem's order with the handles snapped
+    to ``C``, and its energy at the best rotations (written to ``R``).
+
+    Handles are snapped before the first fit, as libigl does, so the first rotations
+    already see the new targets. A coupled energy's first fit reads identity rotations in
+    ``R_prev`` (empty for the others). Returns the positions and the energy in the
+    problem's units.
+
+    Examples
+    --------
+    >>> from arapkit.arap.backends import make_backend
+    >>> from arapkit.arap.problem import ARAPProblem
+    >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    >>> E = np.array([[0, 1], [0, 2], [0, 3], [1, 2], [1, 3], [2, 3]])
+    >>> p = ARAPProblem.from_graph(V, E, np.ones(6), [0, 1, 2])
+    >>> R, none = np.empty((4, 3, 3)), np.empty((0, 3, 3))
+    >>> C = p.constrained_targets(V[:3] / p.scale)
+    >>> P, E0 = start_energy(p, make_backend(p), V, p.scale, C, R, none)
+    >>> abs(E0) < 1e-12, bool(np.allclose(P, V[p.perm] / p.scale))  # rest: no energy
+    (True, True)
+    """
+    # permuted and scaled in one new array: a scaled copy of the whole start as well
+    # would be one more shape alive through the solve (40 MB at 1.75M vertices)
+    P = np.asarray(start, dtype=np.float64)[problem.perm] / units
+    P[problem.elimination.constrained] = C
+    R_prev[:] = np.eye(3)
+    return P, backend.local(P, R, R_prev)
+
+
 def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None, *,
                  tol: float, max_iter: int, callback=None, accelerate: bool = False,
                  history: int = 5, progress=None) -> Result:
@@ -204,7 +235,7 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
 
     el = problem.elimination
     free, cons = el.free, el.constrained
-    perm, inv = problem.perm, problem.iperm
+    inv = problem.iperm
     nf = len(free)
     C = problem.constrained_targets(targets)
     fixed_rhs = np.ascontiguousarray(el.A_fc @ C) if nf else np.zeros((0, 3))
@@ -222,16 +253,8 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         P[cons] = C
         rhs[:] = problem.b_rest[free] - fixed_rhs
     else:
-        # handles are snapped before the first fit, as libigl does, so the first
-        # rotations already see the new targets
-        # permuted and scaled in one new array: a scaled copy of the whole start as well
-        # would be one more shape alive through the solve (40 MB at 1.75M vertices)
-        P = np.asarray(start, dtype=np.float64)[perm] / start_units
-        P[cons] = C
         t0 = time.perf_counter()
-        if coupled:
-            R_prev[:] = np.eye(3)
-        E_prev = backend.local(P, R, R_prev)
+        P, E_prev = start_energy(problem, backend, start, start_units, C, R, R_prev)
         check_finite(E_prev, 0)
         backend.rhs(fixed_rhs, rhs)
         t_local += time.perf_counter() - t0

@@ -529,9 +529,8 @@ class EditorApp(Panels, PointerTools, FileActions):
                 self.vertex_energy = u.vertex_energy
             if u.proxy_vertices is not None:
                 self._show_proxy(u.proxy_mesh, u.proxy_vertices)
-            elif u.vertices is None and not u.final:
-                pass  # progress of an exact solve: the shape shown stays, the status moves
-            else:
+            # an update with neither shape is an exact solve's progress: what is shown stays
+            elif u.vertices is not None or u.final:
                 self._hide_proxy()
                 if u.final and self.dd_view.value == "Energy" and u.vertex_energy is not None:
                     self.rebuild_display()

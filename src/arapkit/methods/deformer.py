@@ -41,7 +41,7 @@ from ..arap.energies import energy_info
 from ..arap.energies.rring import check_ring_scale
 from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
 from ..arap.graph import bandwidth_order, unit_scale
-from ..arap.loop import Result, local_global, with_progress
+from ..arap.loop import Result, local_global, start_energy, with_progress
 from ..arap.problem import ARAPProblem
 from ..arap.rings import Neighbourhoods, check_rings
 from ..errors import Advice, InputError
@@ -553,13 +553,10 @@ class Deformer:
         T = check_targets(self.handles, targets)
         self.prepare()
         s = p.scale
-        X = np.asarray(P, dtype=np.float64)[p.perm] / s
-        X[p.elimination.constrained] = p.constrained_targets(T / s)
         R = np.empty((p.energy.n_owners, 3, 3))
-        # a coupled energy's first local step reads identity rotations, as the solve's does
-        coupled = p.energy.coupling is not None
-        R_prev = np.tile(np.eye(3), (len(R), 1, 1)) if coupled else np.empty((0, 3, 3))
-        return float(self.backend.local(X, R, R_prev) * s * s)
+        R_prev = np.empty_like(R) if p.energy.coupling is not None else np.empty((0, 3, 3))
+        _, E = start_energy(p, self.backend, P, s, p.constrained_targets(T / s), R, R_prev)
+        return float(E * s * s)
 
     def _initial_positions(self, targets: np.ndarray, init) -> np.ndarray | None:
         if init is not None and not isinstance(init, str):

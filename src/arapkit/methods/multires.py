@@ -811,9 +811,9 @@ class MultiresDeformer:
         #: the last two moves a preview saw: their proxy targets, and the shape the older one
         #: ended at (see :meth:`_lead_start`)
         self._moves: tuple[np.ndarray | None, np.ndarray, np.ndarray | None] | None = None
-        #: the handles' version and targets the preview has brought the plain one-ring proxy
-        #: to convergence for
-        self._stiff_done_for: tuple[int, np.ndarray] | None = None
+        #: the targets the preview has brought the plain one-ring proxy to convergence for
+        #: (forgotten with the handles or r)
+        self._stiff_done_for: np.ndarray | None = None
         self._checked: np.ndarray | None = None
         self._full: Deformer | None = None
         # the handles and r change a version; the full problem records the one it was built
@@ -1065,7 +1065,7 @@ class MultiresDeformer:
         self.proxy.prepare()
         self._pose_stiff()
         self._proxy_shape = None
-        self._moves = None
+        self._moves = self._stiff_done_for = None
 
     def set_rings(self, rings) -> None:
         """Use a new rigidity map: the proxy's is rebuilt now, the full mesh's lazily."""
@@ -1074,7 +1074,7 @@ class MultiresDeformer:
         self.proxy.set_rings(self._proxy_rings())
         self.proxy.prepare()
         self._pose_stiff()
-        self._moves = None
+        self._moves = self._stiff_done_for = None
 
     # -- the Deformer interface ---------------------------------------------------------
     @property
@@ -1264,15 +1264,14 @@ class MultiresDeformer:
                                       callback=callback)
             if not stiff.converged:
                 return stiff
-            self._stiff_done_for, start = (self._version, T), stiff.vertices
+            self._stiff_done_for, start = T, stiff.vertices
         return self.proxy.solve(PT, init=start, tol=tol, max_iter=max_iter, callback=callback)
 
     def _stiff_done(self, T: np.ndarray) -> bool:
         """Whether the plain one-ring proxy has converged for these targets already: equal
         ones in a new array (a pose submitted again) go on with the blended proxy."""
         done = self._stiff_done_for
-        return (done is not None and done[0] == self._version
-                and (done[1] is T or np.array_equal(done[1], T)))
+        return done is not None and (done is T or np.array_equal(done, T))
 
     def _proxy_from_rest(self, T: np.ndarray, callback=None, tol: float = PROXY_TOL,
                          max_iter: int = PROXY_MAX_ITER) -> Result:
