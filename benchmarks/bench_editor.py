@@ -258,15 +258,17 @@ PSS_STEP_KIB = 16 * 1024
 class Watch:
     """A thread ticking every :data:`TICK_S`: the longest gap between its ticks is the
     longest time no Python thread of the editor could run (a C call holding the GIL: the
-    page, its websocket and the preview all wait), and every 100 ms it follows the proportional
-    resident memory (Pss) of this process and its children (the decimation's, the factor's).
+    page, its websocket and the preview all wait), and every 100 ms it follows the
+    proportional resident memory (Pss) of this process and its children (the decimation's,
+    the factor's).
 
     Pss is read (``smaps_rollup``) only when the processes' resident sizes, which cost
     nothing to read, add up to :data:`PSS_STEP_KIB` more than at the last Pss read: a new
     peak of the Pss needs one of the resident sizes (so a peak is missed by at most that
-    much). ``smaps_rollup`` walks the page tables, about 33 ms at
-    1.75M vertices; read every 100 ms, it took a third of a core and slowed the release's
-    solve by 12-20 % (1.1-1.9 s at 1.75M), so that the bench measured itself."""
+    much). ``smaps_rollup`` walks the page tables, about 33 ms at 1.75M vertices: read
+    every 100 ms, it took a third of one of the two cores while the bench timed the editor
+    (the release's solve about a second slower at 1.75M in an interleaved library test;
+    ``docs/interactive.md``, seventeenth pass)."""
 
     def __init__(self) -> None:
         self.stall = 0.0
