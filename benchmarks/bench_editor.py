@@ -263,9 +263,12 @@ class Watch:
     the factor's).
 
     Pss is read (``smaps_rollup``) only when the processes' resident sizes, which cost
-    nothing to read, add up to :data:`PSS_STEP_KIB` more than at the last Pss read: a new
-    peak of the Pss needs one of the resident sizes (so a peak is missed by at most that
-    much). ``smaps_rollup`` walks the page tables, about 33 ms at 1.75M vertices: read
+    nothing to read, add up to :data:`PSS_STEP_KIB` more than at the last Pss read. The
+    Pss never exceeds the resident sizes' sum, so a peak is missed by at most that step
+    plus what the resident sizes counted twice at the last read (pages the processes share,
+    which each one's resident size includes: their libraries, the factor's shared buffer;
+    a child's exit can hand them to the parent's Pss without any resident size rising).
+    ``smaps_rollup`` walks the page tables, about 33 ms at 1.75M vertices: read
     every 100 ms, it took a third of one of the two cores while the bench timed the editor
     (the release's solve about a second slower at 1.75M in an interleaved library test;
     ``docs/interactive.md``, seventeenth pass)."""
