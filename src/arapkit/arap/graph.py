@@ -15,7 +15,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import InputError
-from ..mesh.model import EdgeTopology
+from ..mesh.topology import EdgeTopology
 
 if TYPE_CHECKING:
     from ..mesh.model import Mesh

@@ -24,7 +24,8 @@ from dataclasses import dataclass
 import numba as nb
 import numpy as np
 
-from ..mesh.model import Mesh, vertex_adjacency
+from ..mesh.model import Mesh
+from ..mesh.topology import vertex_adjacency
 from ..validate import MAX_RINGS, ring_sizes
 
 __all__ = [

@@ -1,19 +1,19 @@
-"""Triangle mesh model: validation, cached topology, and the number range and scale rules.
+"""Triangle mesh model: validation, repairs and cached topology.
 
 Files are read by :func:`arapkit.io.readers.load_mesh`. A :class:`Mesh` keeps the vertex
 order of its source exactly (handles and rigidity maps refer to vertex indices), repairs
 what it can while saying so in :attr:`Mesh.notes`, and raises
-:class:`~arapkit.errors.InputError` with a one-line message for what it cannot.
+:class:`~arapkit.errors.InputError` with a one-line message for what it cannot. The number
+range and scale rules are :mod:`arapkit.mesh.numbers`, the compiled edge kernels
+:mod:`arapkit.mesh.topology`.
 """
 
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 from functools import cached_property
 
-import numba as nb
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
@@ -21,7 +21,25 @@ from scipy.sparse.csgraph import connected_components
 from ..errors import InputError
 from ..validate import real_array
 from .attributes import MeshAttributes
+from .numbers import (
+    COORDINATE_RANGE,
+    bounding_box_diagonal,
+    check_number_range,
+    extent,
+    kernel_input,
+    normalised,
+    scale_free_vertices,
+)
+from .topology import (
+    EdgeTopology,
+    face_edge_length_sum,
+    union_root,
+    unique_edges,
+    vertex_adjacency,
+)
 
+# the number rules and the topology kernels lived here before: their names stay importable
+# from this module (old import paths keep working)
 __all__ = [
     "COORDINATE_RANGE",
     "EdgeTopology",
@@ -33,131 +51,9 @@ __all__ = [
     "extent",
     "kernel_input",
     "scale_free_vertices",
+    "union_root",
     "vertex_adjacency",
 ]
-
-#: Coordinates (and the mesh's extent) inside ``[1/COORDINATE_RANGE, COORDINATE_RANGE]``
-#: keep every squared length and area of the solver a normal double.
-COORDINATE_RANGE = 1e150
-
-
-def kernel_input(a, dtype) -> np.ndarray:
-    """``a`` as a C-contiguous, read-only array of ``dtype`` (copied only where it must be).
-
-    numba compiles one version of a kernel per argument type, and a read-only array is
-    another type than a writable one: a mesh's own arrays are read-only, shapes the solver
-    sends are not. Passing every input this way keeps one compiled version, which can then
-    be loaded before it is needed.
-
-    Examples
-    --------
-    >>> kernel_input([[0, 1, 2]], np.int64).flags.writeable
-    False
-    """
-    out = np.ascontiguousarray(a, dtype=dtype).view()
-    out.flags.writeable = False
-    return out
-
-
-def check_number_range(vertices: np.ndarray, name: str = "mesh") -> None:
-    """Refuse coordinates whose squares would overflow or underflow a double.
-
-    Loading and validation work at any finite scale (they normalise first), but the
-    solver squares lengths: a coordinate beyond ``COORDINATE_RANGE`` (1e150) in size, or
-    a mesh smaller than its inverse, is outside the numbers it can represent.
-
-    Raises
-    ------
-    InputError
-        Naming ``name``, the size found and the range.
-
-    Examples
-    --------
-    >>> check_number_range(np.array([[0.0, 0, 0], [1e200, 0, 0]]), "big.off")
-    Traceback (most recent call last):
-    ...
-    arapkit.errors.InputError: big.off: coordinates reach 1e+200, beyond the number range ...
-    """
-    V = np.asarray(vertices, dtype=np.float64)
-    big = float(np.max(np.abs(V))) if V.size else 0.0
-    size = float(np.max(extent(V))) if V.size else 0.0
-    lo, hi = 1.0 / COORDINATE_RANGE, COORDINATE_RANGE
-    rng = f"(sizes from {lo:.0e} to {hi:.0e}; squared lengths overflow above about 1e154)"
-    if big > hi:
-        raise InputError(
-            f"{name}: coordinates reach {big:.3g}, beyond the number range arapkit "
-            f"computes in {rng}; rescale the mesh"
-        )
-    if 0 < size < lo:
-        raise InputError(
-            f"{name}: the mesh is only {size:.3g} across, below the number range arapkit "
-            f"computes in {rng}; rescale the mesh"
-        )
-
-
-def extent(vertices: np.ndarray) -> np.ndarray:
-    """Per-axis extent (max - min) computed without overflow (ptp of ±1e308 is inf).
-
-    Examples
-    --------
-    >>> extent(np.array([[-1e308, 0, 0], [1e307, 1, 0]])).tolist()
-    [1.1e+308, 1.0, 0.0]
-    """
-    V = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
-    if len(V) == 0:
-        return np.zeros(3)
-    hi, lo = V.max(axis=0), V.min(axis=0)
-    return 2.0 * (0.5 * hi - 0.5 * lo)
-
-
-def scale_free_vertices(vertices: np.ndarray) -> np.ndarray:
-    """The vertices moved and rescaled by powers of two to about unit size.
-
-    Angles, cotangents and relative tolerances are the same as the input's, and no
-    squared quantity over- or underflows, whatever the input's units.
-
-    Examples
-    --------
-    >>> scale_free_vertices(np.array([[0.0, 0, 0], [3e200, 0, 0]])).tolist()
-    [[0.0, 0.0, 0.0], [0.9798151324726952, 0.0, 0.0]]
-    """
-    return _normalised(np.asarray(vertices, dtype=np.float64))[0]
-
-
-def bounding_box_diagonal(vertices: np.ndarray) -> float:
-    """Length of the bounding-box diagonal (a shape's scale), computed without overflow.
-
-    The one definition of "the diagonal": :attr:`Mesh.bounding_box_diagonal`, weld
-    tolerances, step tolerances and augmentation radii all use it.
-
-    Examples
-    --------
-    >>> bounding_box_diagonal(np.array([[0.0, 0, 0], [3, 4, 0]]))
-    5.0
-    >>> bounding_box_diagonal(np.array([[0.0, 0, 0], [3e300, 4e300, 0]]))
-    5e+300
-    """
-    W, factor = _normalised(np.asarray(vertices, dtype=np.float64).reshape(-1, 3))
-    return float(np.linalg.norm(np.ptp(W, axis=0))) * factor if len(W) else 0.0
-
-
-def _normalised(V: np.ndarray) -> tuple[np.ndarray, float]:
-    """Coordinates rescaled by powers of two (exact) to about unit size, and the factor.
-
-    The translation to the minimum corner keeps far-from-origin meshes accurate; all
-    squared quantities of the result lie near 1, so no tolerance over- or underflows.
-    """
-    big = float(np.max(np.abs(V))) if V.size else 0.0
-    if big == 0.0:
-        return np.zeros_like(V), 1.0
-    e1 = np.frexp(big)[1]
-    W = np.ldexp(V, -e1)
-    W = W - W.min(axis=0)
-    ext = float(np.max(W))
-    if ext == 0.0:
-        return W, 1.0
-    e2 = np.frexp(ext)[1]
-    return np.ldexp(W, -e2), float(np.ldexp(1.0, e1 + e2))
 
 
 def _fan_triangulate(polygons: list[list[int]]) -> tuple[np.ndarray, int]:
@@ -171,185 +67,6 @@ def _fan_triangulate(polygons: list[list[int]]) -> tuple[np.ndarray, int]:
             tris.append((poly[0], poly[t], poly[t + 1]))
     return np.asarray(tris, dtype=np.int64).reshape(-1, 3), split
 
-
-def vertex_adjacency(n: int, edges: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """CSR adjacency ``(ptr, neighbour, edge id)`` of an undirected edge list.
-
-    Each row lists its neighbours in increasing order (repeated edges in input order).
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> ptr, nbr, eid = vertex_adjacency(3, np.array([[0, 1], [1, 2]]))
-    >>> ptr.tolist(), nbr.tolist(), eid.tolist()
-    ([0, 1, 3, 4], [1, 0, 2, 1], [0, 0, 1, 1])
-    """
-    E = np.ascontiguousarray(edges, dtype=np.int64).reshape(-1, 2)
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    np.cumsum(np.bincount(E.ravel(), minlength=n), out=ptr[1:])
-    nbr = np.empty(2 * len(E), dtype=np.int32)
-    eid = np.empty(2 * len(E), dtype=np.int32)
-    _adjacency_rows(E, ptr, nbr, eid)
-    return ptr, nbr, eid
-
-
-@nb.njit(cache=True, nogil=True)
-def _face_edge_length_sum(V, F):  # pragma: no cover - compiled
-    """Sum of |V[F[f, c+1]] - V[F[f, c]]| over every face f and corner c."""
-    total = 0.0
-    for f in range(F.shape[0]):
-        for c in range(3):
-            a, b = F[f, c], F[f, (c + 1) % 3]
-            dx = V[b, 0] - V[a, 0]
-            dy = V[b, 1] - V[a, 1]
-            dz = V[b, 2] - V[a, 2]
-            total += math.sqrt(dx * dx + dy * dy + dz * dz)
-    return total
-
-
-@nb.njit(cache=True, nogil=True)
-def _adjacency_rows(E, ptr, nbr, eid):  # pragma: no cover - compiled
-    # A counting sort by vertex, then each row by neighbour: the order of a stable sort by
-    # (vertex, neighbour) over the entries (i -> j for every edge, then j -> i), which is
-    # what a lexsort gave, at a tenth of its cost.
-    fill = ptr[:-1].copy()
-    m = E.shape[0]
-    for side in range(2):
-        for e in range(m):
-            v, w = E[e, side], E[e, 1 - side]
-            nbr[fill[v]] = w
-            eid[fill[v]] = e
-            fill[v] += 1
-    for v in range(ptr.shape[0] - 1):
-        _sort_row(nbr, eid, ptr[v], ptr[v + 1])
-
-
-@nb.njit(cache=True, nogil=True)
-def _sort_row(key, val, lo, hi):  # pragma: no cover - compiled
-    """Stable sort of ``key[lo:hi]`` carrying ``val`` along: insertion sort for the short
-    rows of a mesh, a merge sort for the rare long one."""
-    if hi - lo > 32:
-        order = np.argsort(key[lo:hi], kind="mergesort")
-        key[lo:hi] = key[lo:hi][order]
-        val[lo:hi] = val[lo:hi][order]
-        return
-    for t in range(lo + 1, hi):
-        k, x = key[t], val[t]
-        u = t - 1
-        while u >= lo and key[u] > k:
-            key[u + 1] = key[u]
-            val[u + 1] = val[u]
-            u -= 1
-        key[u + 1] = k
-        val[u + 1] = x
-
-
-@nb.njit(cache=True, nogil=True)
-def _unique_edges(he, n):  # pragma: no cover - compiled
-    """``np.unique`` of the keys ``min * n + max`` of the half edges, with the inverse: a
-    counting sort by the smaller end, then each (short) bucket by the larger."""
-    m = he.shape[0]
-    ptr = np.zeros(n + 1, dtype=np.int64)
-    for h in range(m):
-        ptr[min(he[h, 0], he[h, 1]) + 1] += 1
-    for v in range(n):
-        ptr[v + 1] += ptr[v]
-    hi_end = np.empty(m, dtype=np.int64)
-    which = np.empty(m, dtype=np.int64)
-    fill = ptr[:-1].copy()
-    for h in range(m):
-        a, b = min(he[h, 0], he[h, 1]), max(he[h, 0], he[h, 1])
-        hi_end[fill[a]] = b
-        which[fill[a]] = h
-        fill[a] += 1
-    inverse = np.empty(m, dtype=np.int64)
-    keys = np.empty(m, dtype=np.int64)
-    count = 0
-    for a in range(n):
-        lo, hi = ptr[a], ptr[a + 1]
-        _sort_row(hi_end, which, lo, hi)
-        for t in range(lo, hi):
-            if t == lo or hi_end[t] != hi_end[t - 1]:
-                keys[count] = a * n + hi_end[t]
-                count += 1
-            inverse[which[t]] = count - 1
-    return keys[:count].copy(), inverse
-
-
-@nb.njit(cache=True, nogil=True)
-def union_root(parent, v):  # pragma: no cover - compiled
-    """The representative of v's set in a union-find forest, halving the path on the way."""
-    while parent[v] != v:
-        parent[v] = parent[parent[v]]
-        v = parent[v]
-    return v
-
-
-@nb.njit(cache=True, nogil=True)
-def _row_components(E, n):  # pragma: no cover - compiled
-    """Component labels of ``n`` vertices where each row of ``E`` (edges or faces) links
-    its vertices, numbered by their lowest vertex (as SciPy's ``connected_components``)."""
-    parent = np.arange(n)
-    for e in range(E.shape[0]):
-        for c in range(1, E.shape[1]):
-            ra, rb = union_root(parent, E[e, 0]), union_root(parent, E[e, c])
-            if ra != rb:  # the lower root stays: each set's root is its lowest vertex
-                parent[max(ra, rb)] = min(ra, rb)
-    labels = np.empty(n, dtype=np.int32)
-    count = 0
-    for v in range(n):
-        r = union_root(parent, v)
-        if r == v:
-            labels[v] = count
-            count += 1
-        else:
-            labels[v] = labels[r]
-    return labels
-
-
-class EdgeTopology:
-    """Vertex adjacency and connected components of anything with ``n_vertices`` and
-    ``edges`` (a :class:`Mesh`, or the solver's :class:`arapkit.arap.problem.EdgeGraph`).
-
-    Examples
-    --------
-    >>> Mesh(np.eye(3), [[0, 1, 2]]).n_components
-    1
-    """
-
-    @property
-    def adjacency(self) -> sp.csr_matrix:
-        """Symmetric vertex adjacency matrix (CSR, ones on edges).
-
-        Built on each access, not kept: its uses (the components, a bandwidth order) are
-        one-off, and it is 121 MB at 1.75M vertices.
-        """
-        E = self.edges
-        n = self.n_vertices
-        A = sp.coo_matrix((np.ones(len(E)), (E[:, 0], E[:, 1])), shape=(n, n))
-        return (A + A.T).tocsr()
-
-    @cached_property
-    def _components(self) -> tuple[int, np.ndarray]:
-        # one compiled union-find pass: SciPy's connected_components on the adjacency
-        # matrix took 0.36 s at 437K vertices, most of it building the matrix
-        labels = _row_components(kernel_input(self._links, np.int64), int(self.n_vertices))
-        return (int(labels.max()) + 1 if len(labels) else 0), labels
-
-    @property
-    def _links(self) -> np.ndarray:
-        """Rows of vertices that are connected: the edges (a mesh: its faces)."""
-        return self.edges
-
-    @property
-    def n_components(self) -> int:
-        """Number of connected components (an isolated vertex is its own)."""
-        return int(self._components[0])
-
-    @property
-    def component_labels(self) -> np.ndarray:
-        """Connected-component label of each vertex."""
-        return self._components[1]
 
 
 class Mesh(EdgeTopology):
@@ -500,7 +217,7 @@ class Mesh(EdgeTopology):
         V = self.vertices
         # Areas of the mesh rescaled (exactly, by powers of two) to unit size: the relative
         # threshold then means the same at 1e-300 and 1e300, and nothing overflows.
-        W, _ = _normalised(V)
+        W, _ = normalised(V)
         cross = np.cross(W[F[:, 1]] - W[F[:, 0]], W[F[:, 2]] - W[F[:, 0]])
         dbl_area = np.linalg.norm(cross, axis=1)
         scale = float(np.max(np.ptp(W, axis=0))) if len(W) > 1 else 1.0
@@ -565,7 +282,7 @@ class Mesh(EdgeTopology):
     def _edge_ids(self) -> tuple[np.ndarray, np.ndarray]:
         """The unique edges (sorted ``(i, j)``, i < j) and the edge id of every half edge."""
         n = self.n_vertices
-        ukeys, inverse = _unique_edges(np.ascontiguousarray(self.half_edges, dtype=np.int64), n)
+        ukeys, inverse = unique_edges(np.ascontiguousarray(self.half_edges, dtype=np.int64), n)
         # the keys themselves are not kept: 40 MB at 1.75M vertices, for nothing the edges
         # do not also say
         return np.stack([ukeys // n, ukeys % n], axis=1), inverse
@@ -633,7 +350,7 @@ class Mesh(EdgeTopology):
             return 0.0
         # one compiled pass over the faces: NumPy's gathers of 3f edge vectors took 2.2 s at
         # 1.75M vertices, on the editor's main thread while a mesh opens
-        return _face_edge_length_sum(self.vertices, self.faces) / (3 * self.n_faces)
+        return face_edge_length_sum(self.vertices, self.faces) / (3 * self.n_faces)
 
     @cached_property
     def bounding_box_diagonal(self) -> float:

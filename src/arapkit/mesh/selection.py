@@ -22,7 +22,8 @@ import numpy as np
 
 from ..errors import InputError
 from ..validate import positions_of
-from .model import COORDINATE_RANGE, extent, kernel_input, union_root
+from .numbers import COORDINATE_RANGE, extent, kernel_input
+from .topology import union_root
 
 __all__ = [
     "HandleContext",
