@@ -123,9 +123,9 @@ def test_building_a_child_factor_leaves_this_process_running():
 def test_a_background_build_puts_the_full_factor_in_a_child(monkeypatch):
     """MultiresDeformer builds its full problem beside the preview in a child; the solve
     from it equals the one whose factor was made here."""
-    import arapkit.methods.multires as mr
+    import arapkit.methods.multires.levels as levels
 
-    monkeypatch.setattr(mr, "_can_overlap", lambda: True)
+    monkeypatch.setattr(levels, "can_overlap", lambda: True)
     monkeypatch.setattr(childfactor, "CHILD_MIN_ROWS", 100)
     mesh = bar(segments=(120, 12, 12))
     h, t = bar_bend(mesh, 60)

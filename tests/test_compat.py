@@ -44,6 +44,7 @@ OLD_NAMES = {
         "load_job_inputs", "method_description", "prepare_job", "save_result"],
     "laplacian": ["LaplacianEditor", "differential_operator", "laplacian_edit"],
     "loop": ["Result", "local_global"],
+    "methods.decimation_child": ["homes", "simplify"],
     "meshwriters": ["write_with_attributes"],
     "orientation": ["AXES", "BoundingBox", "UpGuess", "VIEWS", "bounding_box", "guess_up",
         "parse_axis", "view_frame"],

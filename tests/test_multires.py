@@ -465,10 +465,10 @@ def test_waiting_for_the_factor_after_a_change_where_nothing_builds_in_the_backg
         big, monkeypatch):
     """Where numba's thread layer forbids a background build, wait_ready builds it itself,
     also after the handles changed (a finished build for the old ones is not enough)."""
-    import arapkit.methods.multires as multires_module
+    import arapkit.methods.multires.levels as levels_module
 
     mesh, h, _ = big
-    monkeypatch.setattr(multires_module, "_can_overlap", lambda: False)
+    monkeypatch.setattr(levels_module, "can_overlap", lambda: False)
     d = MultiresDeformer(mesh, h, background=True)
     assert d.wait_ready(120) and d.full_ready
     d.set_handles(h[: len(h) // 2])
@@ -479,28 +479,28 @@ def test_waiting_for_the_factor_after_a_change_where_nothing_builds_in_the_backg
 
 def test_a_background_build_is_asked_for_once_per_version(big, monkeypatch):
     """The editor asks for the full factor on every request: one build per handle set."""
-    import arapkit.methods.multires as multires_module
+    import arapkit.methods.multires.levels as levels_module
 
     mesh, h, _ = big
-    monkeypatch.setattr(multires_module, "_can_overlap", lambda: True)
+    monkeypatch.setattr(levels_module, "can_overlap", lambda: True)
     d = MultiresDeformer(mesh, h)
     d.prepare(background=True)
-    first = d._pending
+    first = d._fine.pending
     d.prepare(background=True)
-    assert first is not None and d._pending is first
+    assert first is not None and d._fine.pending is first
     assert d.wait_ready(120) and d.full_ready
     d.prepare(background=True)  # up to date: nothing to build
-    assert d._pending is first
+    assert d._fine.pending is first
     d.set_handles(h[: len(h) // 2])
     d.prepare(background=True)
-    assert d._pending is not first
+    assert d._fine.pending is not first
     assert d.wait_ready(120) and np.array_equal(d.full.handles, h[: len(h) // 2])
 
 
 def test_decimating_in_a_child_process_gives_the_same_proxy(big):
     """The child runs the same library on the same arrays: the proxy is bitwise the same,
     whether the child is asked directly or through start_decimation and decimate."""
-    import arapkit.methods.multires as mr
+    import arapkit.methods.multires.decimator as mr
 
     mesh = big[0]
     V, F = mr._decimator_input(mesh, mr._frame(mesh), 5_000)
@@ -572,7 +572,7 @@ def test_handle_regions_follow_the_mesh_edges():
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
-    from arapkit.methods.multires import _handle_regions
+    from arapkit.methods.multires.handles import handle_regions as _handle_regions
 
     mesh = bar(segments=(30, 6, 6))
     rng = np.random.default_rng(3)
@@ -598,7 +598,7 @@ def test_mean_edge_length_is_the_mean_over_unique_edges_on_a_closed_mesh():
 def test_checked_targets_are_checked_once_and_cannot_change(big, monkeypatch):
     """A drag's frames pass the read-only array back: no check and no fit again; any other
     array (a caller's own, changed in place) is checked and fitted afresh."""
-    import arapkit.methods.multires as mr
+    import arapkit.methods.multires.coarse_to_fine as mr
 
     mesh, h, t = big
     d = MultiresDeformer(mesh, h)
@@ -727,7 +727,7 @@ def test_homes_are_the_decimators_own_correspondence():
     own replay of that record maps it to, wherever the replay keeps the vertex."""
     import fast_simplification
 
-    from arapkit.methods.decimation_child import simplify
+    from arapkit.methods.multires.decimation_child import simplify
 
     mesh = bar(segments=(120, 10, 10))
     V, F = mesh.vertices.astype(np.float32), mesh.faces.astype(np.int64)
@@ -801,9 +801,9 @@ def test_the_matched_proxy_starts_from_the_plain_one(big):
 
     mesh, h, t = big
     d = MultiresDeformer(mesh, h)
-    assert d._stiff is not None and d.proxy.problem.energy.n_owners > d.proxy_mesh.n_vertices
+    assert d.stage.stiff is not None and d.proxy.problem.energy.n_owners > d.proxy_mesh.n_vertices
     PT = d.proxy_targets(t)
-    plain = d._stiff.solve(PT, init="identity", tol=mr.STIFF_TOL, max_iter=mr.PROXY_MAX_ITER)
+    plain = d.stage.stiff.solve(PT, init="identity", tol=mr.STIFF_TOL, max_iter=mr.PROXY_MAX_ITER)
     want = d.proxy.solve(PT, init=plain.vertices, tol=mr.PROXY_TOL,
                          max_iter=mr.PROXY_MAX_ITER)
     _, got = d.coarse_start(t)
@@ -833,7 +833,7 @@ def test_the_matched_proxy_lands_nearer_the_full_minimum(name, p95, ratio):
     R = Rotation.from_euler("z", 30, degrees=True).as_matrix()
     t = np.vstack([V[base], (V[cap] - c) @ R.T + c + [0.15 * diag, 0.0, 0.0]])
     d = MultiresDeformer(mesh, h, proxy_vertices=5_000)
-    plain = d._stiff.solve(d.proxy_targets(t), init="identity", tol=mr.STIFF_TOL,
+    plain = d.stage.stiff.solve(d.proxy_targets(t), init="identity", tol=mr.STIFF_TOL,
                            max_iter=mr.PROXY_MAX_ITER)
     settled, matched = d.coarse_start(t)
     goal = d.full.solve(t, init=d.solve(t).vertices, tol=1e-9, max_iter=4000)
@@ -855,7 +855,7 @@ def test_a_preview_follows_new_targets_with_the_plain_proxy_then_the_matched_one
     T = d.checked_targets(t)
     first = d.preview(T, max_iter=1)
     PT = d.proxy_targets(T)
-    plain = d._stiff.solve(PT, init=rest.vertices, max_iter=1, tol=1e-4)
+    plain = d.stage.stiff.solve(PT, init=rest.vertices, max_iter=1, tol=1e-4)
     assert np.array_equal(first.proxy.vertices, plain.vertices)
     p = first
     while not p.proxy.converged:
@@ -863,7 +863,7 @@ def test_a_preview_follows_new_targets_with_the_plain_proxy_then_the_matched_one
     # the settled shape is the matched proxy's: its energy is the blended one's there
     E = d.proxy.vertex_energy(p.proxy.vertices, p.proxy.rotations).sum()
     assert p.proxy.energy == pytest.approx(E, rel=1e-9)
-    E_plain = d._stiff.vertex_energy(p.proxy.vertices, p.proxy.rotations).sum()
+    E_plain = d.stage.stiff.vertex_energy(p.proxy.vertices, p.proxy.rotations).sum()
     assert abs(E_plain - E) > 0.01 * E
     # the same pose again, in a new array: the matched proxy goes on from its shape (the
     # plain one converged for these targets already)
@@ -873,7 +873,7 @@ def test_a_preview_follows_new_targets_with_the_plain_proxy_then_the_matched_one
     # a rigidity map set again forgets it: the same targets start again on the plain proxy
     d.set_rings(1)
     renewed = d.preview(T, max_iter=1).proxy
-    want = d._stiff.solve(d.proxy_targets(T), init=again.vertices, max_iter=1, tol=1e-4)
+    want = d.stage.stiff.solve(d.proxy_targets(T), init=again.vertices, max_iter=1, tol=1e-4)
     assert np.array_equal(renewed.vertices, want.vertices)
 
 
@@ -896,7 +896,7 @@ def test_a_new_move_starts_as_far_ahead_as_the_last_move_went(big):
         d.lead = lead
         d.preview(rest, full=False)
         Y = _steps(d, T, 1)
-        plain = d._stiff  # a new move starts on the plain one-ring proxy
+        plain = d.stage.stiff  # a new move starts on the plain one-ring proxy
 
         PT = [d.proxy_targets(d.checked_targets(t)) for t in T]
 
@@ -932,7 +932,7 @@ def test_leading_the_drag_keeps_the_shape_nearer_its_own_targets(big):
         errs = []
         for k in (19, 21, 23):
             PT = d.proxy_targets(d.checked_targets(T[k]))
-            goal = d._stiff.solve(PT, init="identity", tol=1e-10, max_iter=5000)
+            goal = d.stage.stiff.solve(PT, init="identity", tol=1e-10, max_iter=5000)
             assert goal.converged
             errs.append(np.linalg.norm(Y[k] - goal.vertices, axis=1).max() / diag)
         worst[lead] = max(errs)
@@ -950,10 +950,10 @@ def test_a_lead_that_would_raise_the_energy_is_not_taken(big):
     d.lead = True
     d.preview(rest, full=False)
     Y = _steps(d, T[:2], 1)
-    older, last, _ = d._moves
+    older, last, _ = d.stage.moves
     wild = Y[1] + 0.2 * _diag(mesh) * np.sin(np.arange(Y[1].size)).reshape(Y[1].shape)
-    d._moves = (older, last, wild)
+    d.stage.moves = (older, last, wild)
     PT = d.proxy_targets(d.checked_targets(T[2]))
-    assert d._stiff.energy_of(2 * Y[1] - wild, PT) > d._stiff.energy_of(Y[1], PT)
+    assert d.stage.stiff.energy_of(2 * Y[1] - wild, PT) > d.stage.stiff.energy_of(Y[1], PT)
     got = d.preview(d.checked_targets(T[2]), max_iter=1, full=False).proxy.vertices
-    assert np.array_equal(got, d._stiff.solve(PT, init=Y[1], max_iter=1, tol=1e-4).vertices)
+    assert np.array_equal(got, d.stage.stiff.solve(PT, init=Y[1], max_iter=1, tol=1e-4).vertices)

@@ -73,6 +73,7 @@ def main() -> None:
     import arapkit
     from arapkit import Deformer
     from arapkit.methods import multires
+    from arapkit.methods.multires import decimator
 
     meshes = [largest_component(dragon_decimated(10_000)),
               arapkit.load_mesh(DATA / "bunny00.off"),
@@ -89,7 +90,7 @@ def main() -> None:
         full = seconds(full_precompute, mesh, h)
         ready = float("nan")
         if mesh.n_vertices >= multires.AUTO_MIN_VERTICES:
-            multires._cache.clear()
+            decimator._cache.clear()
             ready = seconds(Deformer, mesh, h)
         igl_s = float("nan")
         if mesh.n_vertices <= args.skip_igl_above:

@@ -42,6 +42,8 @@ MOVED = {
     "arapkit.jobs": "arapkit.workflows.jobs",
     "arapkit.laplacian": "arapkit.methods.laplacian",
     "arapkit.loop": "arapkit.arap.loop",
+    # methods/multires.py became a package (its old import path is the package itself)
+    "arapkit.methods.decimation_child": "arapkit.methods.multires.decimation_child",
     "arapkit.meshwriters": "arapkit.io",
     "arapkit.orientation": "arapkit.mesh.orientation",
     "arapkit.problem": "arapkit.arap.problem",
