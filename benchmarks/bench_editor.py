@@ -159,7 +159,8 @@ class FrameCounter:
     A frame counts as a shape when it carries a mesh node's new vertices (the shaded mesh
     or the preview proxy): what a browser would draw. The client runs in its own process,
     as a browser does: in the editor's process its decoding took the editor's GIL (the
-    release at 437K took about 0.25 s longer with it, ``docs/interactive.md``, item 19).
+    release at 437K took about 0.25 s longer with it,
+    ``docs/studies/interactive-at-scale.md``, item 19).
     ``frames`` holds ``(perf_counter time, bytes, shape)`` as they arrive. The client's
     process id goes into ``ignore`` (a :class:`Watch`'s) as soon as it starts, so that the
     memory figures leave it out.
@@ -271,7 +272,7 @@ class Watch:
     ``smaps_rollup`` walks the page tables, about 33 ms at 1.75M vertices: read
     every 100 ms, it took a third of one of the two cores while the bench timed the editor
     (the release's solve about a second slower at 1.75M in an interleaved library test;
-    ``docs/interactive.md``, seventeenth pass)."""
+    ``docs/studies/interactive-at-scale.md``, seventeenth pass)."""
 
     def __init__(self) -> None:
         self.stall = 0.0

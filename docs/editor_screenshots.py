@@ -2,8 +2,8 @@
 
 Run from the repository root with headless Chromium and Playwright installed (as for
 tests/test_editor_browser.py): ``PYTHONPATH=src python docs/editor_screenshots.py``.
-It walks the README's "first five minutes" on examples/cactus.off with the browser tests'
-helpers and saves each step at 3/4 size in 128 colours (about 50 KB each).
+It walks the "first five minutes" of ``docs/editor.md`` on examples/cactus.off with the
+browser tests' helpers and saves each step at 3/4 size in 128 colours (about 50 KB each).
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
-"""Make ``docs/learn-panda.png``: rigidity learned from the panda walk cycle (README figure).
+"""Make ``docs/learn-panda.png``: rigidity learned from the panda walk (``docs/learning.md``).
 
 Learns r = 1..6 from ``../shared/data/sequences/panda_walk_seq.npz`` (61 frames, the first
 is the reference) with the automatic omega, draws the reference coloured by r (1 blue ...
-6 red) and prints the vertex counts per r and the mean r of the body parts named in the
-README, for omega = auto, 0.02 and the paper's 0.3.
+6 red) and prints the vertex counts per r and the mean r of the body parts named in
+``docs/learning.md``, for omega = auto, 0.02 and the paper's 0.3.
 
 Usage::
 

@@ -8,6 +8,8 @@
 * ``docs/figures/cactus-bent.png``: the deformation figure of the same handles, r = 2.
 * ``docs/figures/bar-shared-scale.png``: the bar bent 180 degrees with r = 1, 2, 10 on one
   energy scale (the demo's Fig. 3 style).
+* ``docs/figures/readme-bend.png``: the README's picture: the example finger under
+  ``examples/handles/rotate-limb.json`` at r = 1 and r = 3 (the same handles and targets).
 
 Usage::
 
@@ -84,6 +86,20 @@ def bar_scale() -> None:
     save_figure(fig, OUT / "bar-shared-scale.png", dpi=70)
 
 
+def readme_bend() -> None:
+    """The same bend at r = 1 and r = 3: r = 1 kinks at the joint, r = 3 bends as one piece."""
+    from arapkit import Deformer, load_handles, load_mesh
+    from arapkit.plots.figures import save_figure, series_figure
+
+    mesh = load_mesh(ROOT / "examples" / "finger.off")
+    hs = load_handles(ROOT / "examples" / "handles" / "rotate-limb.json", mesh.vertices)
+    panels = [("rest", mesh.vertices, None)]
+    for r, what in ((1, "standard ARAP"), (3, "stiffer")):
+        res = Deformer(mesh, hs.indices, rings=r).solve(hs.targets)
+        panels.append((f"r = {r} ({what})", res.vertices, None))
+    save_figure(series_figure(mesh.faces, panels), OUT / "readme-bend.png", dpi=80)
+
+
 def main() -> int:
     OUT.mkdir(exist_ok=True)
     if DATA.is_dir():
@@ -92,6 +108,7 @@ def main() -> int:
         print(f"skipped the gallery: {DATA} not found")
     cactus()
     bar_scale()
+    readme_bend()
     print(f"wrote {', '.join(sorted(p.name for p in OUT.glob('*.png')))}")
     return 0
 

@@ -173,7 +173,10 @@ def test_all_lists_importable_public_names():
 
 
 def test_names_the_readme_uses_are_importable_from_arapkit():
-    text = (ROOT / "README.md").read_text()
+    # the README and the user pages that took its reference sections
+    pages = ["README.md", "docs/solver.md", "docs/handles.md", "docs/cli.md", "docs/io.md",
+             "docs/learning.md", "docs/editor.md", "docs/interactive.md", "docs/weights.md"]
+    text = "\n".join((ROOT / p).read_text() for p in pages)
     used = set(re.findall(r"\barapkit\.([a-z_][A-Za-z_]+)\(", text))
     used |= {"save_mesh", "load_handles", "load_rings", "save_rings"}  # named by the issue
     missing = [n for n in sorted(used) if not hasattr(arapkit, n)]

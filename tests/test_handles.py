@@ -350,20 +350,18 @@ def test_handles_json_file_end_to_end(tmp_path, grid):
 
 
 def test_readme_example_is_valid():
-    """The handle JSON example in README.md parses against the built-in bar."""
+    """The handle JSON example of docs/handles.md (the schema's page) parses on the bar."""
     import re
     from pathlib import Path
 
     from arapkit.mesh.shapes import bar
 
-    readme = Path(__file__).resolve().parents[1] / "README.md"
-    text = readme.read_text()
-    if "<!-- cli:begin -->" not in text:
-        pytest.skip("README has no command-line section")
-    section = text.split("<!-- cli:begin -->")[1].split("<!-- cli:end -->")[0]
-    block = re.search(r"```json\n(.*?)```", section, re.S).group(1)
+    page = Path(__file__).resolve().parents[1] / "docs" / "handles.md"
+    text = page.read_text()
+    block = re.search(r"<!-- same-as: examples/bar-bend.json -->\n```json\n(.*?)```", text,
+                      re.S).group(1)
     V = bar().vertices
-    hs = parse_handles(json.loads(block), V, "README.md")
+    hs = parse_handles(json.loads(block), V, "docs/handles.md")
     names = [g.name for g in hs.groups]
     assert names == ["base", "tip"]  # examples/bar-bend.json: no groups that fight
     tip = hs.groups[1]

@@ -1,10 +1,10 @@
 """Shared pieces of the scale study: the dragon, its drags, timing and machine load.
 
 Every script in ``benchmarks/scale/`` measures one part of the design in
-``docs/interactive.md``. Meshes derived from the dragon (decimated, subdivided) are made
-on the fly and cached under ``/tmp/arapkit-scale`` (never committed); the optional
-libraries of the study are looked up in ``/tmp/scale-pkgs`` too (``pip install --target``,
-see the doc), so the project's own environment stays untouched.
+``docs/studies/interactive-at-scale.md``. Meshes derived from the dragon (decimated,
+subdivided) are made on the fly and cached under ``/tmp/arapkit-scale`` (never
+committed); the optional libraries of the study are looked up in ``/tmp/scale-pkgs`` too
+(``pip install --target``, see the doc), so the project's own environment stays untouched.
 """
 
 from __future__ import annotations

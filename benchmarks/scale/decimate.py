@@ -12,7 +12,8 @@ Usage::
     python benchmarks/scale/decimate.py                  # every installed candidate
     python benchmarks/scale/decimate.py --libs fast-simplification libigl --targets 20000
 
-Optional libraries are looked up in /tmp/scale-pkgs as well (see docs/interactive.md).
+Optional libraries are looked up in /tmp/scale-pkgs as well (see
+docs/studies/interactive-at-scale.md).
 """
 
 from __future__ import annotations

@@ -4,7 +4,9 @@ For each mesh and drag, ``Deformer(mesh, handles, accelerate=True, history=m).so
 the default ``tol`` (relative energy decrease 1e-3) for several ``m``: the iterations, the
 rejected extrapolations, and the final energy against the lowest any ``m`` reached. A
 history size that stops sooner at a higher energy is not a faster solver, only an earlier
-stop; this is the evidence behind the stopping-rule question in ``docs/interactive.md``.
+stop; this is the evidence behind the stopping-rule question in
+``docs/studies/interactive-at-scale.md`` (decided: one rule for every size,
+``docs/interactive.md``).
 
 Run from the repository root (about 5 minutes on 2 cores)::
 

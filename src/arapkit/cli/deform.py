@@ -63,7 +63,7 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "-H",
         required=True,
         metavar="FILE",
-        help="handle groups (.json, schema in README) or a per-vertex status file (.sel)",
+        help="handle groups (.json, schema in docs/handles.md) or a per-vertex status file (.sel)",
     )
     p.add_argument(
         "--transform",

@@ -3,7 +3,7 @@
 A handle file is a list of handle groups. Each group selects vertices by exactly one of
 ``indices``, ``box``, ``sphere`` or ``nearest`` and says where they go with ``fixed`` (the
 default), ``translate``, ``rotate`` (then optional ``translate``) or ``targets``. The schema
-is documented in the README (section "Handle files"). :func:`load_handles` also reads the
+is documented in ``docs/handles.md`` ("Handle files"). :func:`load_handles` also reads the
 benchmark ``.sel`` + ``.def`` pairs (:mod:`arapkit.io.seldef`).
 
 Everything here is a pure function of the file contents and the vertex array, so the
@@ -225,7 +225,7 @@ def parse_handles(
     Parameters
     ----------
     data : list of dict, or {"groups": list}
-        Parsed JSON (see the README section "Handle files" for the schema).
+        Parsed JSON (the schema is in ``docs/handles.md``, "Handle files").
     vertices : (n, 3) array_like, or a mesh
         Rest positions (a Mesh or a trimesh stands for its vertices); selections and
         rotations use them.

@@ -72,7 +72,7 @@ class DeformJob:
         Input mesh file.
     handles : str, list or dict
         Handle file (``.json`` groups or ``.sel``), or the handle groups themselves (the
-        JSON schema of the README, already parsed).
+        JSON schema of ``docs/handles.md``, already parsed).
     transform : str or None
         ``.def`` matrix for a ``.sel`` file.
     rings : int

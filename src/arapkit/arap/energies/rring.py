@@ -24,9 +24,9 @@ where both are 0). Where ``a`` is uniform the global matrix is the plain one-rin
 ``2 w_e`` per edge, and the stiffness against bending is the fine mesh's r-ring's. On the
 437K scan under a 20K proxy (``s = 0.21``, ``a = 0.045``) the proxy's minimum lies within
 0.43 % (p95) / 1.3 % (max) of the bounding-box diagonal of the full mesh's, against 1.7 % /
-4.0 % with the plain one-ring (``docs/interactive.md``). Every step still minimises E
-exactly over its block (the triangles' rotations are fitted as the vertices' are), so the
-energy is a descent method's.
+4.0 % with the plain one-ring (``docs/studies/interactive-at-scale.md``). Every step
+still minimises E exactly over its block (the triangles' rotations are fitted as the
+vertices' are), so the energy is a descent method's.
 """
 
 from __future__ import annotations
