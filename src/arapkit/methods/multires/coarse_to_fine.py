@@ -103,7 +103,7 @@ class MultiresDeformer:
         and the full mesh, coarse first (each a decimation of the full mesh, solved to
         :data:`LEVEL_TOL` from the coarser one's skinned solution). Default: none. With
         the stiffness-matched proxy a 100K level under the 437K scan cost 1.1 s of the
-        release and saved 0.5-0.8 s of full iterations (``docs/interactive.md``). The
+        release and saved 0.5-0.8 s of full iterations (``docs/studies/interactive-at-scale.md``). The
         preview does not use them.
     background : bool
         Build the full-resolution problem and its factor on a background thread (the
@@ -129,7 +129,7 @@ class MultiresDeformer:
     lead : bool
         Whether a preview for new targets starts ahead along the drag (see
         :meth:`preview`). False by default: it pays where a preview gets a fixed number
-        of iterations a move, not in the editor's 20 ms chunks (``docs/interactive.md``,
+        of iterations a move, not in the editor's 20 ms chunks (``docs/studies/interactive-at-scale.md``,
         fifteenth pass).
 
     Examples
@@ -398,7 +398,7 @@ class MultiresDeformer:
         move, the shape stays within 0.36 % of the diagonal of its own targets' solution
         instead of 6.4 %. In the editor it is off: there it made each iteration dearer
         (the rotations move more per step) and cost a quarter of the shapes sent, for a
-        mid-drag figure within the bench's noise (``docs/interactive.md``).
+        mid-drag figure within the bench's noise (``docs/studies/interactive-at-scale.md``).
         """
         T = self.checked_targets(targets)
         res = self.stage.preview(T, self._proxy_targets(T), callback, tol,
