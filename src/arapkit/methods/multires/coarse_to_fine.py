@@ -103,8 +103,8 @@ class MultiresDeformer:
         and the full mesh, coarse first (each a decimation of the full mesh, solved to
         :data:`LEVEL_TOL` from the coarser one's skinned solution). Default: none. With
         the stiffness-matched proxy a 100K level under the 437K scan cost 1.1 s of the
-        release and saved 0.5-0.8 s of full iterations (``docs/studies/interactive-at-scale.md``). The
-        preview does not use them.
+        release and saved 0.5-0.8 s of full iterations
+        (``docs/studies/interactive-at-scale.md``). The preview does not use them.
     background : bool
         Build the full-resolution problem and its factor on a background thread (the
         editor: the proxy can preview at once); :meth:`solve` waits for it.
@@ -129,8 +129,8 @@ class MultiresDeformer:
     lead : bool
         Whether a preview for new targets starts ahead along the drag (see
         :meth:`preview`). False by default: it pays where a preview gets a fixed number
-        of iterations a move, not in the editor's 20 ms chunks (``docs/studies/interactive-at-scale.md``,
-        fifteenth pass).
+        of iterations a move, not in the editor's 20 ms chunks
+        (``docs/studies/interactive-at-scale.md``, fifteenth pass).
 
     Examples
     --------
