@@ -187,7 +187,11 @@ class ImplicitEuler:
             raise InputError(f"{problem.name}: masses must be {n} finite values >= 0")
         self.masses = m
         #: the inertial term's weight relative to the energy, ``(1 + a h) / (2 k h^2)``
-        self.beta = (1.0 + self.damping * self.dt) / (2.0 * self.stiffness * self.dt ** 2)
+        with np.errstate(all="ignore"):  # overflow and underflow are refused below
+            h = np.float64(self.dt)
+            beta = (1.0 + np.float64(self.damping) * h) / (2.0 * np.float64(self.stiffness)
+                                                           * h * h)
+        self.beta = float(beta)
         if not math.isfinite(self.beta) or self.beta <= 0:
             raise InputError(f"dynamics: stiffness {self.stiffness:g} and dt {self.dt:g} "
                              "are out of range of double precision")
@@ -287,7 +291,8 @@ class ImplicitEuler:
         p, be, el = self.problem, self.backend, self.elimination
         s = p.scale
         perm, inv, free, cons = p.perm, p.iperm, self.free, el.constrained
-        y = self.predictor(x, v, accel, forces)
+        with np.errstate(over="ignore", invalid="ignore"):  # refused as non-finite below
+            y = self.predictor(x, v, accel, forces)
         Y = y[perm] / s
         C = np.concatenate([np.asarray(targets, dtype=np.float64) / s, x[self.held] / s])
         beta = self.beta
@@ -300,7 +305,8 @@ class ImplicitEuler:
 
         def objective() -> float:
             E = be.local(P, R)
-            return E + beta * float(np.sum(m_int * (P - Y) ** 2))
+            with np.errstate(over="ignore", invalid="ignore"):  # refused as non-finite below
+                return E + beta * float(np.sum(m_int * (P - Y) ** 2))
 
         phi_prev = objective()
         floor = energy_floor(be.rest_term)

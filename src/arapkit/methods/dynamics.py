@@ -343,8 +343,8 @@ class Simulator:
         if frames * n > MAX_FRAME_VERTICES:
             raise InputError(f"frames: {frames} frames of {n} vertices would take "
                              f"{frames * n * 24 / 2**30:.1f} GiB (keep frames x vertices "
-                             f"under {MAX_FRAME_VERTICES:.0e}, e.g. write an OBJ/PLY "
-                             "sequence frame by frame)")
+                             f"under {MAX_FRAME_VERTICES:.0e}; step with Simulator.step to "
+                             "keep only what you need)")
         t0 = time.perf_counter()
         pinned = self.positions[self.handles].copy()
         V = np.empty((frames, n, 3))
