@@ -183,11 +183,11 @@ def test_browser_toggle_gives_secondary_motion(tmp_path):
             assert app.wait_idle(120)
             page.screenshot(path=str(tmp_path / "after.png"))
         last = seen[-1][1]
-        # the body moved on after the drag: several shapes of the last gizmo message, some
-        # of them after the mouse was released
+        # the body moved on after the drag: many shapes answer the last gizmo message (it
+        # takes about a second of the body's time to settle, 30 steps, whatever the load;
+        # three quiet steps end it)
         after = [u for t, u in seen if u.seq == last.seq]
-        assert len(after) >= 3 and seen[-1][0] > released + 0.2, (len(after), seen[-1][0] -
-                                                                   released)
+        assert len(after) >= 8, (len(after), seen[-1][0] - released)
         assert last.final and last.error is None and "secondary motion" in last.notes[0]
         assert np.abs(app.served_vertices() - st.vertices).max() < 1e-5
     finally:
