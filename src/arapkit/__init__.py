@@ -44,6 +44,7 @@ from .learn.fit import LearnedRings, learn_rings
 from .mesh.model import Mesh
 from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .methods.deformer import Deformer, Result
+from .methods.dynamics import Simulator, simulate
 from .methods.laplacian import LaplacianEditor, laplacian_edit
 
 
@@ -72,6 +73,7 @@ __all__ = [
     "LearnedRings",
     "Mesh",
     "Result",
+    "Simulator",
     "UpGuess",
     "__version__",
     "bounding_box",
@@ -90,6 +92,7 @@ __all__ = [
     "select_box",
     "select_nearest",
     "select_sphere",
+    "simulate",
 ]
 del _os  # only needed above; keeps arapkit.os / arapkit._os out of the namespace
 

@@ -225,6 +225,10 @@ class Panels:
         self.nb_maxit = gui.add_number("Max iterations", s.max_iter, min=1, max=100000, step=1)
         self.nb_budget = gui.add_number("Live budget (ms)", s.live_budget_ms, min=1.0,
                                         max=5000.0, step=1.0)
+        self.cb_dynamics = gui.add_checkbox(
+            "Secondary motion", s.dynamics,
+            hint="Drags move an elastic body that lags behind the handles and settles "
+                 "(ARAP dynamics) instead of jumping to the static shape")
         self.bt_solve = gui.add_button("Solve again")
 
     # ---------------------------------------------------------------- callback plumbing
@@ -285,7 +289,8 @@ class Panels:
         self.dd_view.on_update(ui(lambda e: (self.rebuild_display(), self.show_settings())))
         self.cb_show_handles.on_update(ui(lambda e: self.draw_markers()))
         self.dd_up.on_update(ui(lambda e: self._up_chosen()))
-        for w in (self.dd_method, self.dd_weights, self.nb_tol, self.nb_maxit, self.nb_budget):
+        for w in (self.dd_method, self.dd_weights, self.nb_tol, self.nb_maxit, self.nb_budget,
+                  self.cb_dynamics):
             w.on_update(ui(lambda e: self._apply_settings()))
         self.bt_solve.on_click(ui(lambda e: self.request_solve()))
         self.bt_undo.on_click(ui(lambda e: self._history(self.state.undo)))
@@ -301,6 +306,7 @@ class Panels:
         self.md_settings.content = (
             f"View **{self.dd_view.value}**, up **{self.dd_up.value}**{why} · "
             f"method **{s.label}** · weights **{s.weights}**"
+            + (" · **secondary motion**" if s.dynamics else "")
         )
 
     def sync_gui_from_state(self) -> None:
@@ -313,6 +319,7 @@ class Panels:
         self.dd_weights.value = s.weights
         self.nb_tol.value, self.nb_maxit.value = s.tol, s.max_iter
         self.nb_budget.value = s.live_budget_ms
+        self.cb_dynamics.value = s.dynamics
         self.sync_handle_widgets()
 
     def sync_handle_widgets(self) -> None:
@@ -410,6 +417,7 @@ class Panels:
             "tol": self.nb_tol.value,
             "max_iter": self.nb_maxit.value,
             "live_budget_ms": self.nb_budget.value,
+            "dynamics": bool(self.cb_dynamics.value),
         })
         self.state.settings = s
         if (s.method, s.volumetric) != (old.method, old.volumetric):

@@ -89,6 +89,14 @@ class SolverSettings:
     #: coarse to fine (a proxy previews while dragging): None decides by the mesh's size
     #: (:func:`arapkit.methods.deformer.coarse_to_fine`)
     multires: bool | None = None
+    #: secondary motion: drags move an elastic body that lags and settles
+    #: (:mod:`arapkit.editor.motion`) instead of the static solve
+    dynamics: bool = False
+    #: its stiffness in N/m; None: scaled to the mesh (:func:`arapkit.editor.motion.
+    #: editor_stiffness`), so that any mesh wobbles on the same time scale
+    stiffness: float | None = None
+    #: its mass damping rate in 1/s
+    damping: float = 4.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.method, str):
@@ -147,4 +155,11 @@ class SolverSettings:
         s.live_max_iter = validate.iteration_cap(s.live_max_iter, "session solver: live_max_iter")
         s.live_budget_ms = validate.number(s.live_budget_ms, "session solver: live_budget_ms",
                                            lo=0.0, hi=3.6e6)
+        if not isinstance(s.dynamics, bool):
+            raise InputError(f"session solver: dynamics must be true or false, got "
+                             f"{s.dynamics!r:.40}")
+        if s.stiffness is not None:
+            s.stiffness = validate.number(s.stiffness, "session solver: stiffness", lo=0.0,
+                                          lo_open=True)
+        s.damping = validate.number(s.damping, "session solver: damping", lo=0.0, hi=1e6)
         return s

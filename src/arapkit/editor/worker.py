@@ -25,6 +25,12 @@ one. Any other request (the drag's release, a new handle, a repainted r) first p
 the same way, then runs ``deformer.solve(targets)``: the exact result, the same computation
 as a script's ``Deformer(...).solve(targets)``.
 
+Secondary motion
+----------------
+With ``settings.dynamics`` the request is not solved for the static shape: the elastic
+body of :mod:`arapkit.editor.motion` steps towards the targets, sending every step's
+shape, until it settles or a newer drag move arrives (the body then carries on with it).
+
 Examples
 --------
 >>> from arapkit.mesh.shapes import bar, bar_bend
@@ -52,6 +58,7 @@ from typing import Any
 
 import numpy as np
 
+from arapkit.editor.motion import SecondaryMotion
 from arapkit.editor.settings import SolverSettings
 from arapkit.errors import worded_for
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
@@ -202,6 +209,8 @@ class SolveWorker:
         self._running = False
         self._seq = 0
         self._engine = _Engine()
+        #: the elastic body of secondary motion (settings.dynamics), kept between drags
+        self._motion = SecondaryMotion()
         self._shape: np.ndarray | None = None
         self._shape_mesh: Any = None
         self._thread: threading.Thread | None = None
@@ -331,10 +340,27 @@ class SolveWorker:
             return
         t0 = time.perf_counter()
         one_shot = _ONE_SHOT.get(req.settings.method)
-        if one_shot is not None:
+        if req.settings.dynamics:
+            self._solve_motion(req)
+        elif one_shot is not None:
             one_shot(self, req, t0)
         else:
             self._solve_iterative(req, t0)
+
+    def _solve_motion(self, req: SolveRequest) -> None:
+        """Secondary motion: step the elastic body towards the targets until it settles or
+        a newer drag move arrives (:mod:`arapkit.editor.motion`)."""
+        first = [True]
+
+        def emit(V: np.ndarray, energy: float, iters: int, converged: bool, final: bool,
+                 **extra: Any) -> None:
+            self._emit(req, V, energy, iters, converged, final, **extra)
+            if first[0]:
+                self._record_latency(req)
+                first[0] = False
+
+        self._motion.run(req, self._start_shape(req), emit, lambda: self.has_newer,
+                         lambda V: self._keep(req, V))
 
     def _solve_laplacian(self, req: SolveRequest, t0: float) -> None:
         ed = self._engine.laplacian_editor(req)

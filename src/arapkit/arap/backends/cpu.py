@@ -277,11 +277,17 @@ class CPUBackend:
         self._make_chunks(nbh, en.n_owners)
         self.slot = _NO_INT
 
-    def bind(self, problem: ARAPProblem) -> CPUBackend:
-        """Use ``problem`` (same energy, possibly other handles); factorises if needed."""
+    def bind(self, problem: ARAPProblem, elimination=None) -> CPUBackend:
+        """Use ``problem`` (same energy, possibly other handles); factorises if needed.
+
+        ``elimination`` (an :class:`~arapkit.arap.constraints.Elimination` of another
+        system on the same vertices, e.g. a dynamics step's, :mod:`arapkit.arap.dynamics`)
+        sets the free/constrained split of :meth:`rhs` instead of the problem's own, which
+        is then not factorised.
+        """
         assert problem.energy is self.problem.energy
         self.problem = problem
-        self.slot = problem.elimination.slot
+        self.slot = (problem.elimination if elimination is None else elimination).slot
         return self
 
     def _make_chunks(self, nbh, n: int) -> None:
