@@ -12,6 +12,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -57,6 +58,23 @@ def test_deform_runs_on_the_examples_without_the_extras(tmp_path):
                        "--transform", EX / "bar.def", "-o", out, "--quiet")
     assert proc.returncode == 0, proc.stderr
     assert out.is_file() and "converged: yes" in proc.stdout
+
+
+def test_ply_with_custom_properties_needs_no_plyfile(tmp_path):
+    """PLY in and out with the core alone: plyfile (GPL) is not imported, a property stays."""
+    from ply_oracle import parse_ply
+
+    from arapkit.io import load_mesh, save_mesh
+
+    bar = load_mesh(EX / "bar.off")
+    quality = np.linspace(0, 1, bar.n_vertices)
+    save_mesh(tmp_path / "bar.ply", bar.vertices, bar.faces, {"quality": quality})
+    out = tmp_path / "bent.ply"
+    proc = cli_without((*GUI, "plyfile"), "deform", tmp_path / "bar.ply", "--handles",
+                       EX / "bar.sel", "--transform", EX / "bar.def", "-o", out, "--quiet")
+    assert proc.returncode == 0, proc.stderr
+    vert = parse_ply(out.read_bytes())["elements"]["vertex"]
+    assert vert["quality"] == quality.tolist()
 
 
 def _plots_line(what: str) -> str:
@@ -121,7 +139,7 @@ def _names(requirements: list[str]) -> set[str]:
 def test_core_dependencies_carry_no_gui_or_plotting_stack():
     project = _pyproject()
     core = _names(project["dependencies"])
-    assert core == {"numpy", "scipy", "numba", "cholespy", "trimesh", "tqdm", "plyfile",
+    assert core == {"numpy", "scipy", "numba", "cholespy", "trimesh", "tqdm",
                     "fast-simplification"}
     extras = project["optional-dependencies"]
     assert "matplotlib" in _names(extras["plots"])

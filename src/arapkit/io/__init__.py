@@ -8,6 +8,7 @@ Modules
 -------
 formats   the readable, writable and figure formats (one list each)
 readers   :func:`load_mesh`, :func:`read_ply_vertex_properties`
+ply       the PLY format read whole (:func:`read_ply`: every element, property and list)
 writers   :func:`save_mesh` (plain, or with everything the source carried)
 atomic    atomic output, output-path checks, strict JSON
 arrays    :func:`load_numpy` for user-given ``.npy`` / ``.npz`` files
@@ -56,6 +57,7 @@ from .handles import (
     parse_handles,
     save_handles,
 )
+from .ply import PlyFile, read_ply
 from .readers import load_mesh, read_ply_vertex_properties
 from .rigidity import load_rings, save_rings
 from .seldef import load_def, load_sel, save_def, save_sel
@@ -70,6 +72,7 @@ __all__ = [
     "HandleSet",
     "MESH_FORMATS",
     "MOTION_KEYS",
+    "PlyFile",
     "READ_FORMATS",
     "SELECTION_KEYS",
     "atomic_open",
@@ -88,6 +91,7 @@ __all__ = [
     "mesh_format",
     "parse_handles",
     "ply_property_column",
+    "read_ply",
     "read_ply_vertex_properties",
     "read_text",
     "readable_formats",

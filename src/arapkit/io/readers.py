@@ -1,5 +1,5 @@
-"""Reading mesh files: OFF and OBJ parsed strictly here, PLY and STL through trimesh (and
-plyfile for the PLY files trimesh misreads), all without reordering vertices.
+"""Reading mesh files: OFF and OBJ parsed strictly here, PLY by :mod:`arapkit.io.ply`, STL
+through trimesh, all without reordering vertices.
 
 Everything a file carries besides positions and triangles is kept in ``mesh.attributes``
 for :func:`arapkit.io.writers.save_mesh` ``(..., like=mesh)``. Every problem with a file is
@@ -27,10 +27,9 @@ from ..errors import InputError
 from ..mesh.attributes import MeshAttributes
 from ..mesh.model import Mesh, scale_free_vertices
 from .formats import READ_FORMATS, readable_formats
+from .ply import PlyFile, PlyList, read_ply
 
 __all__ = ["load_mesh", "read_ply_vertex_properties"]
-
-
 
 
 def _read_bytes(path: str) -> tuple[bytes, str]:
@@ -315,122 +314,39 @@ def _load_with_trimesh(data: bytes, ext: str, path: str):
     return m
 
 
-def _ply_header_counts(data: bytes, path: str) -> dict[str, int]:
-    head = data[: data.find(b"end_header")].decode("ascii", "replace")
-    counts = {}
-    for line in head.splitlines():
-        parts = line.split()
-        if len(parts) == 3 and parts[0] == "element":
-            try:
-                counts[parts[1]] = int(parts[2])
-            except ValueError:
-                raise InputError(
-                    f"{path}: PLY header: element {parts[1]!r} has count {parts[2]!r}, "
-                    "not a whole number"
-                ) from None
-    return counts
-
-
-def _ply_columns(element: dict) -> dict[str, np.ndarray]:
-    """Columns of a trimesh ``_ply_raw`` element, each with its file type."""
-    data, types = element.get("data"), element.get("properties", {})
-    if data is None:
-        return {}
-    names = data.dtype.names if hasattr(data, "dtype") else list(data)
-    out = {}
-    for name in names or ():
-        col = np.asarray(data[name])
-        if col.dtype.names:
-            # a fixed-length list in a binary file: (count, values) records
-            col = np.asarray(col[col.dtype.names[-1]])
-        elif col.ndim == 2 and col.shape[1] == 1:
-            col = col[:, 0]
-        t = types.get(name)
-        if col.dtype != object and col.ndim == 1 and t is not None:
-            try:
-                col = col.astype(np.dtype(t).newbyteorder("="))
-            except TypeError:  # a list type string: keep what trimesh read
-                pass
-        out[name] = col
-    return out
-
-
-def _lists_consistent(raw: dict) -> bool:
-    """Whether every fixed-length list trimesh read has the length each record declares.
-
-    trimesh reads binary lists with the first record's length for all of them; a file
-    mixing triangles and quads whose total happens to fit is then read as garbage.
-    """
-    for element in raw.values():
-        data = element.get("data")
-        if not hasattr(data, "dtype") or data.dtype.names is None:
-            continue
-        for name in data.dtype.names:
-            col = data[name]
-            if col.dtype.names and len(col.dtype.names) == 2:
-                count, values = col[col.dtype.names[0]], col[col.dtype.names[1]]
-                width = values.shape[-1] if values.ndim > 1 else 1
-                if np.any(np.asarray(count).ravel() != width):
-                    return False
-    return True
-
-
-def _read_ply(data: bytes, path: str) -> dict:
-    """Raw PLY elements as ``{name: {"data": columns, "properties": {name: dtype}}}``.
-
-    trimesh reads uniform files fast; a binary file mixing polygon sizes is beyond its
-    reader, so plyfile (which reads any valid PLY) takes over then.
-    """
-    try:
-        m = _load_with_trimesh(data, "ply", path)
-        raw = getattr(m, "metadata", {}).get("_ply_raw")
-        if raw and _lists_consistent(raw):
-            return raw
-        first_error = f"{path}: cannot parse as PLY"
-    except InputError as exc:
-        first_error = str(exc)
-    try:
-        from plyfile import PlyData
-
-        ply = PlyData.read(io.BytesIO(data))
-    except Exception:  # plyfile raises several types for malformed files
-        raise InputError(first_error) from None
-    out = {}
-    for el in ply.elements:
-        cols = {p.name: el[p.name] for p in el.properties}
-        types = {p.name: (p.val_dtype if not hasattr(p, "len_dtype") else "$LIST")
-                 for p in el.properties}
-        out[el.name] = {"data": cols, "properties": types, "length": len(el.data)}
-    return out
-
-
-def _ply_parts(raw: dict, path: str) -> tuple[np.ndarray, np.ndarray | list, MeshAttributes]:
-    """Positions, faces (file order) and attributes from raw PLY elements."""
-    vcols = _ply_columns(raw.get("vertex", {}))
-    fcols = _ply_columns(raw.get("face", {}))
-    if not all(c in vcols for c in "xyz"):
+def _ply_parts(ply: PlyFile, path: str) -> tuple[np.ndarray, np.ndarray | list, MeshAttributes]:
+    """Positions, faces (file order) and attributes of a read PLY file."""
+    vertex = ply.elements.get("vertex")
+    vcols = dict(vertex.data) if vertex is not None else {}
+    if not all(isinstance(vcols.get(c), np.ndarray) for c in "xyz"):
         raise InputError(f"{path}: PLY vertices have no x, y, z properties")
-    V = np.stack([vcols.pop(c).astype(np.float64) for c in "xyz"], axis=1)
-    key = next((k for k in ("vertex_indices", "vertex_index") if k in fcols), None)
-    lost = [f"PLY element '{e}'" for e in raw if e not in ("vertex", "face")]
+    with np.errstate(invalid="ignore"):  # a signalling NaN (refused by the Mesh, by vertex)
+        V = np.stack([vcols.pop(c).astype(np.float64) for c in "xyz"], axis=1)
+    face = ply.elements.get("face")
+    fcols = dict(face.data) if face is not None else {}
+    key = next((k for k in ("vertex_indices", "vertex_index")
+                if isinstance(fcols.get(k), PlyList)), None)
     if key is None:
         raise InputError(f"{path}: no faces (PLY has no face element with vertex_indices)")
+    if face.count == 0:
+        raise InputError(f"{path}: no faces (the PLY face element is empty)")
+    # an empty element loses nothing; one with records is not written back
+    lost = [f"PLY element '{e}'" for e, el in ply.elements.items()
+            if e not in ("vertex", "face") and el.count]
     idx = fcols.pop(key)
-    if idx.dtype != object and idx.ndim == 2:
-        sizes = np.full(len(idx), idx.shape[1], dtype=np.int64)
-        corners = idx.astype(np.int64).ravel()
+    sizes, corners = idx.sizes.astype(np.int64), idx.values.astype(np.int64)
+    if np.all(sizes == 3):
+        faces: np.ndarray | list = corners.reshape(-1, 3)
     else:
-        polys = [np.asarray(p, dtype=np.int64) for p in idx]
-        sizes = np.array([len(p) for p in polys], dtype=np.int64)
-        corners = np.concatenate(polys) if polys else np.zeros(0, np.int64)
-    faces = (corners.reshape(-1, 3) if np.all(sizes == 3)
-             else np.split(corners, np.cumsum(sizes)[:-1]))
-    vprops = {k: v for k, v in vcols.items() if v.ndim == 1 and v.dtype != object}
-    fprops = {k: v for k, v in fcols.items() if v.ndim == 1 and v.dtype != object}
+        # lists of Python ints: what the Mesh's polygon checks walk fastest (3x np.split's)
+        flat, ends = corners.tolist(), np.cumsum(sizes).tolist()
+        faces = [flat[a:b] for a, b in zip([0, *ends[:-1]], ends, strict=True)]
+    vprops = {k: v for k, v in vcols.items() if isinstance(v, np.ndarray)}
+    fprops = {k: v for k, v in fcols.items() if isinstance(v, np.ndarray)}
     lost += [f"PLY list property '{k}'" for k in vcols if k not in vprops]
     lost += [f"PLY face list property '{k}'" for k in fcols if k not in fprops]
     attrs = MeshAttributes("ply", sizes, corners, vertex_properties=vprops,
-                           face_properties=fprops, lost=lost)
+                           face_properties=fprops, lost=lost, comments=ply.header_notes)
     return V, faces, attrs
 
 
@@ -446,7 +362,7 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     ----------
     path : str or path-like
         Mesh file. OFF and OBJ are parsed strictly here (a truncated file is an
-        error); PLY and STL go through trimesh with processing disabled.
+        error); PLY is read whole by :mod:`arapkit.io.ply`, STL through trimesh.
 
     Returns
     -------
@@ -487,13 +403,7 @@ def _parse_mesh(data: bytes, ext: str, path: str) -> Mesh:
             f"{path}: unsupported mesh format '.{ext}' (use {readable_formats(' or ')})"
         )
     if ext == "ply":
-        V, F, attrs = _ply_parts(_read_ply(data, path), path)
-        counts = _ply_header_counts(data, path)
-        if counts.get("vertex", len(V)) != len(V) or counts.get("face", 0) > attrs.n_faces:
-            raise InputError(
-                f"{path}: truncated: header promises {counts.get('vertex')} vertices and "
-                f"{counts.get('face')} faces, read {len(V)} and {attrs.n_faces}"
-            )
+        V, F, attrs = _ply_parts(read_ply(data, path), path)
         return _mesh_with_attributes(V, F, name, attrs)
     m = _load_with_trimesh(data, ext, path)
     # STL stores every triangle with its own corners; without welding every triangle
@@ -533,8 +443,6 @@ def read_ply_vertex_properties(path: str | os.PathLike) -> dict[str, np.ndarray]
     >>> read_ply_vertex_properties(p)["energy"].tolist()
     [0.5, 1.0, 2.0]
     """
-    import trimesh
-
     path = Path(path)
     try:
         raw = path.read_bytes()
@@ -544,18 +452,7 @@ def read_ply_vertex_properties(path: str | os.PathLike) -> dict[str, np.ndarray]
         raise InputError(f"{path}: file not found") from None
     except (OSError, EOFError) as e:
         raise InputError(f"{path}: cannot read ({e})") from None
-    try:
-        loaded = trimesh.load(io.BytesIO(raw), file_type="ply", process=False)
-    except Exception as e:  # trimesh raises many types on malformed PLY
-        raise InputError(f"{path}: not a readable PLY file ({e})") from None
-    ply_raw = getattr(loaded, "metadata", {}).get("_ply_raw", {})
-    data = ply_raw.get("vertex", {}).get("data")
-    # trimesh gives a structured array, or a dict of arrays for some binary layouts
-    if isinstance(data, dict):
-        names = list(data)
-    else:
-        names = getattr(getattr(data, "dtype", None), "names", None)
-    if not names:
+    vertex = read_ply(raw, str(path)).elements.get("vertex")
+    if vertex is None:
         raise InputError(f"{path}: PLY file has no vertex element")
-    cols = {name: np.asarray(data[name]) for name in names}
-    return {name: a.reshape(-1) for name, a in cols.items() if a.ndim == 1 or a.shape[1:] == (1,)}
+    return {k: v for k, v in vertex.data.items() if isinstance(v, np.ndarray)}

@@ -47,6 +47,8 @@ __all__ = ["ply_property_column", "save_mesh", "write_with_attributes"]
 _PLY_NAMES = {
     "f8": "double", "f4": "float", "i4": "int", "u4": "uint", "i2": "short",
     "u2": "ushort", "i1": "char", "u1": "uchar",
+    # beyond the standard, as trimesh writes them (a source file's own types, kept)
+    "i8": "int64", "u8": "uint64", "f2": "float16",
 }
 
 
@@ -182,15 +184,19 @@ def _ply(V: np.ndarray, attrs: MeshAttributes, props: Mapping[str, np.ndarray]) 
     count_t = np.dtype("<i4") if big else np.dtype("u1")
     fprops = attrs.face_properties if attrs.source_format == "ply" else {}
     pdt = [(k, np.dtype(v.dtype).newbyteorder("<").str) for k, v in fprops.items()]
-    header = ["ply", "format binary_little_endian 1.0", "comment written by arapkit",
-              f"element vertex {n}"]
+    header = ["ply", "format binary_little_endian 1.0", "comment written by arapkit"]
+    if attrs.source_format == "ply":
+        # the source's comments and obj_info (a TextureFile among them), once each
+        header += [c for c in attrs.comments if c != header[2]]
+    header.append(f"element vertex {n}")
     header += [f"property {_ply_type(t)} {k}" for k, t in vdt]
     header += [f"element face {attrs.n_faces}",
                f"property list {'int' if big else 'uchar'} int vertex_indices"]
     header += [f"property {_ply_type(t)} {k}" for k, t in pdt]
     header.append("end_header")
     body = _ply_faces(attrs, count_t, fprops, pdt)
-    return ("\n".join(header) + "\n").encode("ascii") + vert.tobytes() + body
+    # latin-1: the source's header bytes are written back as they were read
+    return ("\n".join(header) + "\n").encode("latin-1") + vert.tobytes() + body
 
 
 def _ply_faces(attrs, count_t, fprops, pdt) -> bytes:

@@ -57,6 +57,9 @@ class MeshAttributes:
         ``face`` element beyond ``vertex_indices``, with their file types.
     off_keyword : str
         Header keyword of an OFF file (``OFF``, ``COFF`` ...).
+    comments : list of str
+        The ``comment`` and ``obj_info`` header lines of a PLY file, verbatim and in order
+        (``comment TextureFile tex.png`` names a texture).
     lost : list of str
         What the loader could not keep (said on load, and again on save).
     """
@@ -73,6 +76,7 @@ class MeshAttributes:
     vertex_properties: dict[str, np.ndarray] = field(default_factory=dict)
     face_properties: dict[str, np.ndarray] = field(default_factory=dict)
     off_keyword: str = "OFF"
+    comments: list[str] = field(default_factory=list)
     lost: list[str] = field(default_factory=list)
 
     @property
