@@ -19,7 +19,7 @@ Examples
 """
 
 from .live import FRAME_MS, SETTLE_S, LiveDeformer, Shape
-from .rig import HANDLE_KINDS, GroupHandle, Rig, make_rig, rings_from_weights
+from .rig import HANDLE_KINDS, GroupHandle, Rig, make_rig, mesh_notes, rings_from_weights
 from .settings import method_items, takes_rigidity_map, weight_items
 
 __all__ = [
@@ -31,6 +31,7 @@ __all__ = [
     "Rig",
     "Shape",
     "make_rig",
+    "mesh_notes",
     "method_items",
     "rings_from_weights",
     "takes_rigidity_map",

@@ -39,9 +39,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from ..mesh.model import Mesh
 from ..validate import MAX_RINGS, integer, real_array
 
-__all__ = ["HANDLE_KINDS", "GroupHandle", "Rig", "make_rig", "rings_from_weights"]
+__all__ = ["HANDLE_KINDS", "GroupHandle", "Rig", "make_rig", "mesh_notes",
+           "rings_from_weights"]
 
 #: how a handle group is held: pinned where it is, or carried by an object or a bone
 HANDLE_KINDS = ("fixed", "moving")
@@ -179,3 +181,30 @@ def rings_from_weights(weights, r_min: int, r_max: int, what: str = "rigidity") 
     hi = integer(r_max, f"{what}: r at weight 1", lo=1, hi=MAX_RINGS)
     w = np.clip(np.nan_to_num(real_array(weights, what), nan=0.0), 0.0, 1.0)
     return np.rint(lo + w * (hi - lo)).astype(np.int32)
+
+
+def mesh_notes(mesh: Mesh, polygons: int = 0) -> tuple[str, ...]:
+    """What the report says about a Blender mesh as it is solved, most important first.
+
+    The library's repairs (:attr:`arapkit.Mesh.notes`: dropped faces, loose vertices kept
+    fixed), then non-manifold edges (solved as they are: the energy needs no manifold),
+    then ``polygons``, the faces with more than three corners, which the add-on solves as
+    Blender's own triangles (its triangulation handles concave n-gons).
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1], [1, 1, 1]])
+    >>> mesh_notes(Mesh(V[:3], [[0, 1, 2]]), polygons=2)
+    ("2 quad(s) or n-gon(s) solved as Blender's triangles",)
+    >>> fan = Mesh(V, [[0, 1, 2], [0, 1, 3], [0, 1, 4]])
+    >>> mesh_notes(fan)
+    ('1 non-manifold edge(s) (more than two faces): solved as they are',)
+    """
+    out = list(mesh.notes)
+    bad = mesh.n_nonmanifold_edges
+    if bad:
+        out.append(f"{bad} non-manifold edge(s) (more than two faces): solved as they are")
+    if polygons:
+        out.append(f"{polygons} quad(s) or n-gon(s) solved as Blender's triangles")
+    return tuple(out)
