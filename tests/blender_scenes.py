@@ -66,6 +66,7 @@ def coords(obj) -> np.ndarray:
 
 
 def key_coords(obj, name: str) -> np.ndarray:
+    """A shape key's coordinates read point by point (not the add-on's fast path)."""
     kb = obj.data.shape_keys.key_blocks[name]
     co = np.empty(3 * len(kb.data), dtype=np.float32)
     kb.data.foreach_get("co", co)
@@ -135,11 +136,15 @@ def scene_solve(out: Path) -> dict:
         engine.pump()
         if session.shape is not None and not np.array_equal(session.shape, shape0):
             live_shape = session.shape.copy()
-    assert engine.wait(obj, 300)
+    assert engine.wait(obj, 300)  # the drag has stopped: solved on, warm-started
+    warm = session.shape.copy()
+    assert bpy.ops.object.arap_deform() == {"FINISHED"}  # Update: the exact solve
+    session = engine.session_of(obj)
     np.savez(out / "result.npz", base_before=base_before, base_after=coords(obj),
              uv_before=uv_before, uv_after=uvs(obj), rest=bind,
              tris=engine.triangles(obj)[0], shape0=shape0, key0=key0,
-             live=live_shape, shape1=session.shape, key1=key_coords(obj, engine.SHAPE_KEY),
+             live=live_shape, warm=warm, shape1=session.shape,
+             key1=key_coords(obj, engine.SHAPE_KEY),
              temperature=_attribute(obj, "temperature"))
     return {"empty_rest": empty_rest, "empty_moved": _matrix(empty.matrix_world),
             "object": _matrix(obj.matrix_world), "status": obj.arap_deform.status,
@@ -174,6 +179,7 @@ def scene_bone(out: Path) -> dict:
     pb.rotation_euler = (0.0, 0.7, 0.0)
     bpy.context.view_layer.update()
     assert engine.wait(obj, 300)
+    assert bpy.ops.object.arap_deform() == {"FINISHED"}  # Update: the exact solve
     after = (np.array(arm.matrix_world), np.array(pb.matrix))
     np.savez(out / "result.npz", rest=coords(obj), tris=engine.triangles(obj)[0],
              shape=engine.session_of(obj).shape, arm_before=before[0], bone_before=before[1],
@@ -287,6 +293,7 @@ def scene_installed(out: Path) -> dict:
     empty.location.z += 1.0
     bpy.context.view_layer.update()
     assert engine.wait(obj, 600)
+    assert bpy.ops.object.arap_deform() == {"FINISHED"}  # Update: the exact solve
     session = engine.session_of(obj)
     np.savez(out / "result.npz", rest=coords(obj), tris=engine.triangles(obj)[0],
              shape=session.shape, handles=session.rig.handles, targets=session.last_targets,

@@ -147,16 +147,17 @@ def test_the_exact_solve_is_the_librarys_solve():
     assert np.abs(shape.vertices - mesh.vertices).max() > 0.1 * diag
 
 
-def test_a_drag_sends_live_shapes_then_settles_on_the_exact_solve():
+def test_a_drag_sends_live_shapes_and_converges_warm_started():
+    """A drag: live shapes while it moves, then the last pose solved on to convergence from
+    the last shape (the stopping test's distance from the exact solve, not a restart)."""
     mesh, h, t, r = _case()
-    live = LiveDeformer(mesh, h, r, frame_ms=5.0, settle_s=0.05)
+    live = LiveDeformer(mesh, h, r, frame_ms=5.0, tol=1e-6)
     got = []
     try:
         live.request(t, exact=True)
-        live.wait(300)
-        # a drag: twelve poses, a little further each time, no waiting between them
+        first = live.wait(300)
         _, t_end = bar_bend(mesh, 110)
-        for k in range(1, 13):
+        for k in range(1, 13):  # twelve poses, a little further each time, no waiting
             live.request(t + (t_end - t) * k / 12)
             time.sleep(0.01)
             shape = live.poll()
@@ -165,32 +166,14 @@ def test_a_drag_sends_live_shapes_then_settles_on_the_exact_solve():
         final = live.wait(300)
     finally:
         live.close()
-    assert any(not s.exact for s in got), "no live shape was sent during the drag"
-    assert final.exact and final.converged
-    want = Deformer(mesh, h, rings=r).solve(t_end)
-    assert np.abs(final.vertices - want.vertices).max() <= SAME * mesh.bounding_box_diagonal
-
-
-def test_a_live_shape_is_warm_started_and_follows():
-    """Without the exact pass (settle_s=None) the live result converges from the last shape:
-    near the exact one (same stopping test), not equal to it."""
-    mesh, h, t, r = _case()
-    live = LiveDeformer(mesh, h, r, settle_s=None, tol=1e-6)
-    try:
-        live.request(t, exact=True)
-        first = live.wait(300)
-        _, t2 = bar_bend(mesh, 90)
-        live.request(t2)
-        shape = live.wait(300)
-    finally:
-        live.close()
-    want = Deformer(mesh, h, rings=r, tol=1e-6).solve(t2).vertices
     diag = mesh.bounding_box_diagonal
-    assert not shape.exact and shape.converged
-    assert np.abs(shape.vertices[h] - t2).max() <= SAME * diag
-    assert np.abs(shape.vertices - want).max() <= 1e-3 * diag
-    # it followed: far from where the previous pose left it
-    assert np.abs(shape.vertices - first.vertices).max() > 0.05 * diag
+    assert got and not any(s.exact for s in got), "no live shape was sent during the drag"
+    assert not final.exact and final.converged
+    assert np.abs(final.vertices[h] - t_end).max() <= SAME * diag
+    want = Deformer(mesh, h, rings=r, tol=1e-6).solve(t_end).vertices
+    assert np.abs(final.vertices - want).max() <= 1e-3 * diag
+    # it followed: far from where the first pose left it
+    assert np.abs(final.vertices - first.vertices).max() > 0.05 * diag
 
 
 def test_methods_without_a_rigidity_map_ignore_the_painted_one():
@@ -259,3 +242,23 @@ def test_the_callers_thread_never_waits_for_a_solve():
     finally:
         live.close()
     assert worst < 0.25, f"a call waited {worst:.3f} s"
+
+
+def test_every_new_shape_is_polled_once():
+    """poll() hands each new shape over exactly once, and never one wait() returned."""
+    mesh, h, t, _ = _case(rings=False)
+    live = LiveDeformer(mesh, h)
+    try:
+        for k in range(20):
+            live.request(t * (1.0 + 1e-3 * k), exact=True)
+            assert live.wait(300).error is None
+            assert live.poll() is None, f"round {k}: the shape wait() returned came again"
+            before = live.sent
+            live.request(t * (1.0 - 1e-3 * k), exact=True)
+            deadline = time.monotonic() + 60
+            while (got := live.poll()) is None and time.monotonic() < deadline:
+                time.sleep(0.001)
+            assert got is not None and live.sent == before + 1, f"round {k}: missed"
+            assert live.poll() is None
+    finally:
+        live.close()

@@ -17,8 +17,12 @@ Two kinds of request
   the skinned full shape.
 * **exact**: ``deformer.solve(targets)`` from rest, the same computation as a script's
   ``Deformer(...).solve(targets)``, so the shape key does not depend on the path the drag
-  took. A live request that has converged turns into an exact one once no newer request
-  came for :data:`SETTLE_S` (the drag has stopped).
+  took: what the Deform button, rendering and ``blender -b`` ask for.
+
+When a drag stops, a plain mesh's live solve simply runs on to convergence, warm-started (as
+the browser editor's does: it lands within the stopping test of the exact solve, without
+starting over). A large mesh's preview is its proxy's, so there, once no newer request came
+for :data:`SETTLE_S`, the exact solve follows (the editor's release).
 
 Examples
 --------
@@ -119,7 +123,8 @@ class LiveDeformer:
     frame_ms : float
         How often a live solve sends a shape.
     settle_s : float
-        How long a drag must pause before the exact solve runs (None: never).
+        How long a drag on a large mesh must pause before the exact solve runs (None:
+        never).
     """
 
     def __init__(self, mesh: Mesh, handles, rings=1, *, method: str = "rring",
@@ -139,7 +144,7 @@ class LiveDeformer:
         self._open = True
         self._seq = 0
         self._latest: Shape | None = None
-        self._taken = 0
+        self._taken = 0  # how many shapes had been sent when the caller last took one
         self._deformer: Any = None
         self._shape: np.ndarray | None = None  # the warm start of the next live solve
         #: what the thread is doing, for the panel ("preparing", "solving", "idle", ...)
@@ -165,11 +170,10 @@ class LiveDeformer:
     def poll(self) -> Shape | None:
         """The newest shape not yet taken, or None (never waits: for Blender's timer)."""
         with self._cond:
-            s = self._latest
-            if s is None or self._taken == id(s):
+            if self._latest is None or self._taken == self.sent:
                 return None
-            self._taken = id(s)
-            return s
+            self._taken = self.sent  # shapes are counted: an id() could be reused
+            return self._latest
 
     def wait(self, timeout: float | None = None) -> Shape | None:
         """Wait until no request is waiting or running; return the newest shape.
@@ -183,7 +187,7 @@ class LiveDeformer:
                 if left is not None and left <= 0:
                     break
                 self._cond.wait(left)
-            self._taken = id(self._latest)
+            self._taken = self.sent
             return self._latest
 
     @property
@@ -253,8 +257,8 @@ class LiveDeformer:
             converged = self._live_coarse(d, req)
         else:
             converged = self._live(d, req)
-        if not converged or self.settle_s is None:
-            return
+        if not converged or self.settle_s is None or not isinstance(d, MultiresDeformer):
+            return  # a plain live solve that converged is the result
         with self._cond:  # the drag has stopped: the exact solve for the same targets
             self._cond.wait_for(self._newer, self.settle_s)
             if self._newer():
