@@ -143,7 +143,8 @@ def scene_solve(out: Path) -> dict:
     np.savez(out / "result.npz", base_before=base_before, base_after=coords(obj),
              uv_before=uv_before, uv_after=uvs(obj), rest=bind,
              tris=engine.triangles(obj)[0], shape0=shape0, key0=key0,
-             live=live_shape, warm=warm, shape1=session.shape,
+             live=np.zeros((0, 3)) if live_shape is None else live_shape,
+             warm=warm, shape1=session.shape,
              key1=key_coords(obj, engine.SHAPE_KEY),
              temperature=_attribute(obj, "temperature"))
     return {"empty_rest": empty_rest, "empty_moved": _matrix(empty.matrix_world),
