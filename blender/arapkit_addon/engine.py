@@ -287,6 +287,8 @@ def show(obj: bpy.types.Object, session: Session, shape) -> bool:
         s.status = "; ".join((f"{'converged' if shape.converged else 'stopped'} in "
                               f"{shape.iterations} iterations, {shape.elapsed_ms:.0f} ms",
                               *notes))
+    elif shape.converged:  # a drag's last pose, solved on from the last shape
+        s.status = f"converged (following the handles, {shape.iterations} iterations)"
     else:
         s.status = "following the handles"
     return True
@@ -316,6 +318,9 @@ def pump() -> int:
         if obj is None or obj.type != "MESH":
             session.live.close(timeout=0.0)
             del _sessions[uid]
+            continue
+        if not obj.arap_deform.live:  # an undo went back to before Deform
+            stop(obj)
             continue
         if len(obj.data.vertices) != session.n_vertices:
             stop(obj)
