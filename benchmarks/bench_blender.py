@@ -12,7 +12,10 @@ newest shape into the shape key), for :data:`DRAG_S` seconds. Reported:
   Blender's thread (update plus timer): what a user would feel as a frozen viewport;
 * **iterations/s of the library**: ``Deformer.solve`` warm-started on the same mesh, in
   the same run, without Blender: the baseline the shapes are drawn from;
-* **settle**: from the last move to the exact solve's shape.
+* **settle**: from the last move to the converged shape (warm-started; coarse to fine:
+  the exact solve);
+* **key write**: one shape into the shape key, the add-on's way (``ShapeKey.points``)
+  against the per-point ``ShapeKey.data``.
 
 Usage: ``python benchmarks/bench_blender.py [--quick] [--large]`` with bpy installed
 (``pip install --no-deps bpy``); without it the script says so and exits 0.
@@ -102,10 +105,22 @@ def run(cuts: int, again: int = 0) -> dict:
     t1 = time.perf_counter()
     res = d.solve(T, init=session.shape, tol=1e-12, max_iter=20)
     per_s = res.iterations / (time.perf_counter() - t1)
+    # writing a shape into the key: the add-on's path (ShapeKey.points, one array) against
+    # the per-point one (ShapeKey.data), interleaved, median of 20 each
+    kb = obj.data.shape_keys.key_blocks[engine.SHAPE_KEY]
+    flat = session.shape.astype(np.float32).ravel()
+    times = {"points": [], "data": []}
+    for _ in range(20):
+        for how in times:
+            t2 = time.perf_counter()
+            getattr(kb, how).foreach_set("co", flat)
+            times[how].append(time.perf_counter() - t2)
     frames_ms = np.array(frames) * 1e3
     out = {"vertices": n, "first deform s": first, "shapes/s": written / drag,
            "main max ms": frames_ms.max(), "main p95 ms": np.percentile(frames_ms, 95),
            "library it/s": per_s, "settle s": settle, "status": s.status,
+           "key write ms": np.median(times["points"]) * 1e3,
+           "per-point write ms": np.median(times["data"]) * 1e3,
            "multires": type(d).__name__ == "MultiresDeformer"}
     engine.stop_all()
     arapkit_addon.unregister()
@@ -126,7 +141,7 @@ def main(argv: list[str] | None = None) -> int:
     sizes = [(28, 0)] if args.quick else [(90, 0)] + ([(64, 1)] if args.large else [])
     rows = [run(*c) for c in sizes]
     keys = ["vertices", "first deform s", "shapes/s", "main max ms", "main p95 ms",
-            "library it/s", "settle s", "multires"]
+            "library it/s", "settle s", "multires", "key write ms", "per-point write ms"]
     print("| " + " | ".join(keys) + " |")
     print("|" + "---|" * len(keys))
     for r in rows:

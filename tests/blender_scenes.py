@@ -188,6 +188,32 @@ def scene_bone(out: Path) -> dict:
     return {"status": obj.arap_deform.status}
 
 
+def scene_animation(out: Path) -> dict:
+    """An animated empty: each frame set (as a render or ``blender -b`` sets it) gets the
+    exact solve of that frame's pose before the frame is done."""
+    bpy = _bpy()
+    engine = _addon()
+    obj = make_bar(cuts=5)
+    bpy.ops.object.empty_add(location=(2.3, -0.2, 0.5))
+    empty = bpy.context.object
+    rig_bar(obj, empty)
+    empty.keyframe_insert("location", frame=1)
+    empty.location = (2.0, 0.8, 1.6)
+    empty.keyframe_insert("location", frame=10)
+    bpy.context.scene.frame_set(1)
+    assert bpy.ops.object.arap_deform() == {"FINISHED"}
+    shapes, poses = [], []
+    for frame in (4, 10):
+        bpy.context.scene.frame_set(frame)  # frame_change_post: solved before it returns
+        shapes.append(key_coords(obj, engine.SHAPE_KEY).astype(np.float64))
+        poses.append(np.array(empty.matrix_world))
+    bpy.context.scene.frame_set(1)
+    np.savez(out / "result.npz", rest=coords(obj), tris=engine.triangles(obj)[0],
+             shapes=np.array(shapes), poses=np.array(poses),
+             object=np.array(obj.matrix_world), exact=engine.session_of(obj).shape)
+    return {"status": obj.arap_deform.status}
+
+
 def scene_bad(out: Path) -> dict:
     """Bad input: each case's message from the operator, and the mesh left as it was."""
     bpy = _bpy()
@@ -303,7 +329,8 @@ def scene_installed(out: Path) -> dict:
             "status": obj.arap_deform.status, "first_solve_s": first_s}
 
 
-SCENES = {"solve": scene_solve, "bone": scene_bone, "bad": scene_bad,
+SCENES = {"solve": scene_solve, "bone": scene_bone, "animation": scene_animation,
+          "bad": scene_bad,
           "install": scene_install, "installed": scene_installed}
 
 

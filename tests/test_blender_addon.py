@@ -154,6 +154,25 @@ def test_a_bone_carries_its_group(tmp_path):
     assert np.abs(a["shape"] - want).max() <= SAME * mesh.bounding_box_diagonal
 
 
+def test_each_frame_of_an_animation_is_solved_exactly(tmp_path):
+    """Setting a frame (rendering, blender -b) waits for that pose's exact solve."""
+    info, a = run_scene("animation", tmp_path)
+    V = a["rest"]
+    pin, tip = _bar_handles(V)
+    mesh = Mesh(V, a["tris"])
+    rest_pose = np.eye(4)
+    rest_pose[:3, 3] = (2.3, -0.2, 0.5)
+    rest_pose = rest_pose.astype(np.float32).astype(np.float64)  # as Blender stores it
+    w = np.float32(np.round(np.clip(1.0 - np.abs(V[:, 0]) / 2.0, 0.0, 1.0), 2))
+    rings = np.rint(1 + 3 * w.astype(np.float64)).astype(np.int32)
+    for shape, pose in zip(a["shapes"], a["poses"]):
+        h, T = _targets(V, pin, tip, _local_motion(a["object"], rest_pose, pose))
+        want = Deformer(mesh, h, rings=rings, tol=1e-4).solve(T).vertices
+        # the key is float32: its round-off, not the solve's, bounds the difference
+        assert np.abs(shape - want).max() <= 1e-6 * np.abs(want).max()
+    assert np.abs(a["shapes"][1] - a["shapes"][0]).max() > 0.05 * mesh.bounding_box_diagonal
+
+
 def test_bad_input_is_one_line_in_the_report_and_the_mesh_is_kept(tmp_path):
     results, _ = run_scene("bad", tmp_path)
     expected = {
