@@ -289,6 +289,9 @@ def test_the_zip_installs_into_a_clean_blender_and_deforms(extension, tmp_path):
     site_ext = str(tmp_path / "user" / "extensions" / ".local")
     for module, path in info["files"].items():
         assert path.startswith(site_ext), f"{module} from {path}, not the extension"
+    # the compiled kernels are kept in the extension's user folder, for the next session
+    cache = tmp_path / "user" / "extensions" / ".user" / "user_default" / "arapkit"
+    assert list(cache.rglob("*.nbi")), f"no numba cache in {cache}"
     mesh = Mesh(a["rest"], a["tris"])
     want = Deformer(mesh, a["handles"], rings=a["rings"], tol=1e-4).solve(a["targets"])
     assert np.abs(a["shape"] - want.vertices).max() <= SAME * mesh.bounding_box_diagonal

@@ -10,10 +10,29 @@ handle objects: a moved object re-solves at once (depsgraph update), an animatio
 
 from __future__ import annotations
 
+import os
+
 import bpy
 from bpy.app.handlers import persistent
 
-from . import engine, ops, props, ui
+
+def _numba_cache() -> None:
+    """Keep numba's compiled kernels in this extension's user folder (Blender's place for
+    an extension's files; its own folder may be read-only and is replaced on update), so
+    they compile once, not in every session. Set before arapkit imports numba; a cache
+    folder chosen by the user (NUMBA_CACHE_DIR) is kept."""
+    if "NUMBA_CACHE_DIR" in os.environ:
+        return
+    try:
+        folder = bpy.utils.extension_path_user(__package__, path="numba-cache", create=True)
+    except (ValueError, AttributeError):  # not installed as an extension (a test's import)
+        return
+    os.environ["NUMBA_CACHE_DIR"] = folder
+
+
+_numba_cache()
+
+from . import engine, ops, props, ui  # noqa: E402 - after the cache folder is set
 
 _rendering = False
 

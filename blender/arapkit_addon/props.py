@@ -40,21 +40,27 @@ def _changed(self, context) -> None:
         engine.mark_stale(obj)
 
 
+def _handle_changed(self, context) -> None:
+    """A handle's group, kind, object or bone changed: its rest pose is taken anew."""
+    self.bound = False
+    _changed(self, context)
+
+
 class ARAPHandle(bpy.types.PropertyGroup):
     """One handle: a vertex group, held fixed or carried by an object or a bone."""
 
     group: StringProperty(name="Vertex Group", description="The handle's vertices",
-                          update=_changed)
+                          update=_handle_changed)
     kind: EnumProperty(
         name="Kind",
         items=[("FIXED", "Fixed", "The group stays where it is"),
                ("MOVING", "Moving", "The group follows an object or a bone")],
-        default="FIXED", update=_changed)
+        default="FIXED", update=_handle_changed)
     target: PointerProperty(name="Object", type=bpy.types.Object,
                             description="The object (an empty, a hook ...) or armature "
-                                        "that carries the group", update=_changed)
+                                        "that carries the group", update=_handle_changed)
     bone: StringProperty(name="Bone", description="With an armature: the bone that "
-                                                  "carries the group", update=_changed)
+                                                  "carries the group", update=_handle_changed)
     # the pose when bound (what the Hook modifier keeps as its inverse matrix), as Blender's
     # own float32 matrices, row-major: the motion is then computed in float64 from exactly
     # the numbers Blender has (a product stored in float32 would be off by its round-off)
