@@ -18,6 +18,7 @@ import numpy as np
 from arapkit.blender import (
     GroupHandle,
     LiveDeformer,
+    Rig,
     make_rig,
     mesh_notes,
     rings_from_weights,
@@ -38,7 +39,7 @@ class Session:
 
     uid: int
     live: LiveDeformer
-    rig: object
+    rig: Rig
     rest: np.ndarray
     n_vertices: int
     #: per moving group, in the rig's order: its handle item's index
