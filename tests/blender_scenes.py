@@ -214,6 +214,66 @@ def scene_animation(out: Path) -> dict:
     return {"status": obj.arap_deform.status}
 
 
+class _Layout:
+    """A stand-in for Blender's UI layout (there is none without a window): it checks that
+    every property, collection and operator the panel names exists, and records them."""
+
+    def __init__(self, seen: list):
+        self.seen = seen
+
+    def _sub(self, *args, **kwargs):
+        return _Layout(self.seen)
+
+    row = column = box = split = _sub
+
+    def prop(self, data, name, **kwargs):
+        assert name in data.bl_rna.properties, f"no property {name!r} on {data}"
+        self.seen.append(("prop", name))
+
+    def prop_search(self, data, name, search_data, search_name, **kwargs):
+        assert name in data.bl_rna.properties, f"no property {name!r} on {data}"
+        assert search_name in search_data.bl_rna.properties, f"no {search_name!r}"
+        self.seen.append(("search", name, search_name))
+
+    def operator(self, idname, **kwargs):
+        group, name = idname.split(".")
+        assert hasattr(getattr(_bpy().ops, group), name), f"no operator {idname}"
+        self.seen.append(("operator", idname))
+
+    def label(self, **kwargs):
+        self.seen.append(("label", kwargs.get("text", "")))
+
+    def template_list(self, listtype, list_id, data, name, active_data, active_name, **kw):
+        bpy = _bpy()
+        assert hasattr(bpy.types, listtype), f"no UI list {listtype}"
+        assert name in data.bl_rna.properties and active_name in active_data.bl_rna.properties
+        draw_item = getattr(bpy.types, listtype).draw_item  # a UIList is Blender's to make
+        for i, item in enumerate(getattr(data, name)):
+            draw_item(None, bpy.context, self, data, item, 0, active_data, active_name, i)
+        self.seen.append(("list", name))
+
+
+def scene_panel(out: Path) -> dict:
+    """The panel drawn in each state a user meets: before Deform, painted r, an armature."""
+    bpy = _bpy()
+    engine = _addon()
+    ui = sys.modules["arapkit_addon.ui"]
+    obj = make_bar(cuts=2)
+    bpy.ops.object.armature_add(location=(2.0, 0, 0))
+    arm = bpy.context.object
+    rig_bar(obj, arm, arm.data.bones[0].name)
+    seen: dict[str, list] = {}
+    obj.arap_deform.rigidity = "UNIFORM"
+    ui.draw(_Layout(seen.setdefault("before", [])), obj)
+    obj.arap_deform.rigidity = "GROUP"
+    assert bpy.ops.object.arap_deform() == {"FINISHED"}
+    ui.draw(_Layout(seen.setdefault("painted, running", [])), obj)
+    obj.arap_deform.method = "sr-arap"  # no rigidity map: no rigidity controls
+    ui.draw(_Layout(seen.setdefault("sr-arap", [])), obj)
+    engine.stop_all()
+    return {k: [list(x) for x in v] for k, v in seen.items()}
+
+
 def scene_bad(out: Path) -> dict:
     """Bad input: each case's message from the operator, and the mesh left as it was."""
     bpy = _bpy()
@@ -330,7 +390,7 @@ def scene_installed(out: Path) -> dict:
 
 
 SCENES = {"solve": scene_solve, "bone": scene_bone, "animation": scene_animation,
-          "bad": scene_bad,
+          "panel": scene_panel, "bad": scene_bad,
           "install": scene_install, "installed": scene_installed}
 
 

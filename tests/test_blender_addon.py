@@ -174,6 +174,23 @@ def test_each_frame_of_an_animation_is_solved_exactly(tmp_path):
     assert np.abs(a["shapes"][1] - a["shapes"][0]).max() > 0.05 * mesh.bounding_box_diagonal
 
 
+def test_the_panel_draws_what_each_state_needs(tmp_path):
+    """No window without a desktop: the panel draws into a stand-in layout that checks every
+    property, vertex-group search and operator it names exists (tests/blender_scenes.py)."""
+    seen, _ = run_scene("panel", tmp_path)
+    names = {state: {tuple(x[:2]) for x in calls} for state, calls in seen.items()}
+    assert ("prop", "r") in names["before"] and ("search", "rigidity_group") not in names[
+        "before"]
+    assert ("search", "rigidity_group") in names["painted, running"]
+    assert not {("prop", "r"), ("prop", "r_min"), ("search", "rigidity_group")} & names[
+        "sr-arap"]  # a method without a rigidity map shows no rigidity controls
+    assert ("operator", "object.arap_stop") not in names["before"]
+    assert ("operator", "object.arap_stop") in names["painted, running"]
+    for state in seen:  # the handle list: group, kind, and for a moving one its object, bone
+        assert {("search", "group"), ("prop", "kind"), ("prop", "target"),
+                ("search", "bone"), ("list", "handles")} <= names[state]
+
+
 def test_bad_input_is_one_line_in_the_report_and_the_mesh_is_kept(tmp_path):
     results, _ = run_scene("bad", tmp_path)
     expected = {
