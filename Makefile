@@ -17,7 +17,7 @@ demo: $(STAMP)
 	$(BIN)/arapkit demo --out demo-output
 
 test: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks blender
 	$(BIN)/lint-imports
 	$(BIN)/python -m pytest -q
 
@@ -25,8 +25,16 @@ bench: $(STAMP)
 	$(BIN)/python benchmarks/run_all.py
 
 lint: $(STAMP)
-	$(BIN)/ruff check src tests benchmarks
+	$(BIN)/ruff check src tests benchmarks blender
 	$(BIN)/lint-imports
+
+# The Blender extension (docs/blender.md): one zip per platform in dist/, each with arapkit and
+# its dependencies as wheels for Blender's Python 3.11 (from PyPI; needs Python 3.11+ with
+# pip, not the venv). `make blender-addon BLENDER_PLATFORMS=linux-x64` builds one.
+BLENDER_PLATFORMS ?= linux-x64 windows-x64 macos-arm64 macos-x64
+.PHONY: blender-addon
+blender-addon:
+	$(PYTHON) blender/build.py $(addprefix --platform ,$(BLENDER_PLATFORMS)) --out dist
 
 clean:
 	rm -rf $(VENV) demo-output .pytest_cache

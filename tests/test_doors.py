@@ -98,6 +98,9 @@ def _expressible(v: Variant, interface: str) -> bool:
             v.rings == "1" or can.rigidity_map) and (not v.volumetric or can.volumetric)
     if interface == "torch":
         return not v.volumetric and v.init == "identity"
+    if interface == "blender":  # its Method menu lists only what it offers; no volume, no init
+        return interface in can.interfaces and v.init == "identity" and not v.volumetric and (
+            v.rings == "1" or can.rigidity_map)
     return True
 
 
@@ -270,8 +273,47 @@ def _torch(v: Variant, folder: Path, capsys) -> np.ndarray:
     return layer(torch.tensor(hs.targets)).detach().numpy()
 
 
+def _rigid_fit(P: np.ndarray, Q: np.ndarray) -> np.ndarray:
+    """The 4x4 rigid motion taking points P to Q (Kabsch): a handle object's motion."""
+    p0, q0 = P.mean(axis=0), Q.mean(axis=0)
+    U, _, Vt = np.linalg.svd((P - p0).T @ (Q - q0))
+    D = np.diag([1.0, 1.0, np.sign(np.linalg.det(Vt.T @ U.T))])
+    M = np.eye(4)
+    M[:3, :3] = Vt.T @ D @ U.T
+    M[:3, 3] = q0 - M[:3, :3] @ p0
+    return M
+
+
+def _blender(v: Variant, folder: Path, capsys) -> np.ndarray:
+    """The add-on's path without Blender: groups as weights, objects as motions, the
+    painted map as weights mapped to r (tests/test_blender_addon.py runs it in Blender)."""
+    from arapkit.blender import GroupHandle, LiveDeformer, make_rig, method_items
+
+    mesh, hs, _ = _case()
+    assert v.energy in [name for name, _, _ in method_items()]
+    groups, motions = [], []
+    for g in hs.groups:
+        w = np.zeros(mesh.n_vertices)
+        w[g.indices] = 1.0
+        moving = not np.array_equal(g.targets, mesh.vertices[g.indices])
+        groups.append(GroupHandle(g.name, "moving" if moving else "fixed", w))
+        if moving:
+            motions.append(_rigid_fit(mesh.vertices[g.indices], g.targets))
+    rig = make_rig(mesh.n_vertices, groups, "cactus")
+    live = LiveDeformer(mesh, rig.handles, _rings(v), method=v.energy)
+    try:
+        live.request(rig.targets(mesh.vertices, motions), exact=True)
+        shape = live.wait(300)
+    finally:
+        live.close()
+    if shape.error is not None:
+        raise InputError(shape.error)
+    return shape.vertices
+
+
 DRIVERS = {"library": lambda v, folder, capsys: _library(v, folder), "cli": _deform,
-           "compare": _compare, "batch": _batch, "editor": _editor, "torch": _torch}
+           "compare": _compare, "batch": _batch, "editor": _editor, "torch": _torch,
+           "blender": _blender}
 
 
 def test_every_interface_has_a_driver():

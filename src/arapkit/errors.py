@@ -27,7 +27,7 @@ class InputError(ValueError):
 
 
 #: the interfaces a message can be worded for
-INTERFACES = ("python", "cli", "editor")
+INTERFACES = ("python", "cli", "editor", "blender")
 
 
 def option(name: str, value: str, interface: str = "python") -> str:
@@ -39,11 +39,15 @@ def option(name: str, value: str, interface: str = "python") -> str:
     ("weights='cotan-clamped'", '--weights cotan-clamped')
     >>> option("weights", "cotan-clamped", "editor")
     "weights 'cotan-clamped' in the Solver panel"
+    >>> option("weights", "cotan-clamped", "blender")
+    "Weights 'cotan-clamped' in the ARAP Deform panel"
     """
     if interface == "cli":
         return f"--{name.replace('_', '-')} {value}"
     if interface == "editor":
         return f"{name} '{value}' in the Solver panel"
+    if interface == "blender":
+        return f"{name.replace('_', ' ').capitalize()} '{value}' in the ARAP Deform panel"
     return f"{name}={value!r}"
 
 

@@ -26,9 +26,10 @@ __all__ = ["INTERFACES", "VOLUMETRIC_INTERFACES", "MethodInfo", "MethodOption", 
            "method_names", "methods", "register"]
 
 #: the doors a method can be offered through: :class:`arapkit.Deformer` ("library"),
-#: ``arapkit deform`` ("cli"), ``arapkit compare``, ``arapkit batch``, the editor's solver
-#: and :class:`arapkit.torch.ARAPLayer` ("torch")
-INTERFACES = ("library", "cli", "compare", "batch", "editor", "torch")
+#: ``arapkit deform`` ("cli"), ``arapkit compare``, ``arapkit batch``, the editor's solver,
+#: :class:`arapkit.torch.ARAPLayer` ("torch") and the Blender add-on's ARAP Deform panel
+#: ("blender", :mod:`arapkit.blender`)
+INTERFACES = ("library", "cli", "compare", "batch", "editor", "torch", "blender")
 #: the doors that offer volumetric ARAP (``volumetric=True``) to a method that runs on a
 #: volume: batch jobs and the torch layer have no volume
 VOLUMETRIC_INTERFACES = ("library", "cli", "compare", "editor")
