@@ -320,13 +320,35 @@ def test_neighbour_pairs_lists_each_pair_once():
         (0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3), (4, 5)]
 
 
-def test_torch_layer_matches_the_deformer():
+def test_torch_layer_forward_and_gradient():
+    """ARAPLayer (the registry offers it the torch door) solves as the Deformer does, and
+    its implicit gradient matches central differences of converged solves."""
     torch = pytest.importorskip("torch", reason="PyTorch not installed")
     from arapkit.torch import ARAPLayer
 
     c = sphere_case()
-    want = Deformer(c.mesh, c.handles, energy="smooth-arap").solve(c.targets, tol=1e-6)
-    layer = ARAPLayer(c.mesh, c.handles, energy="smooth-arap", tol=1e-6,
-                      dtype=torch.float64)
+    steps = {"tol": 0.0, "max_iter": 60}  # the same 60 iterations: round-off apart
+    want = Deformer(c.mesh, c.handles, energy="smooth-arap").solve(c.targets, **steps)
+    layer = ARAPLayer(c.mesh, c.handles, energy="smooth-arap", dtype=torch.float64, **steps)
     got = layer(torch.tensor(c.targets)).detach().numpy()
-    assert np.abs(got - want.vertices).max() < 1e-3 * c.mesh.bounding_box_diagonal
+    assert np.abs(got - want.vertices).max() < 1e-9 * c.mesh.bounding_box_diagonal
+
+    # few free vertices: Smooth ARAP converges slowly (docs/smooth-arap.md), and the
+    # finite differences need converged solves
+    mesh = bumpy_sphere(subdivisions=1)
+    z = mesh.vertices[:, 2]
+    h = np.append(np.flatnonzero(z < 0.2), np.argmax(z))
+    t = mesh.vertices[h].copy()
+    t[-1] += [0.1, 0.0, 0.3]
+    layer = ARAPLayer(mesh, h, energy="smooth-arap", dtype=torch.float64, tol=0.0,
+                      xtol=1e-13, max_iter=20_000)
+    rng = np.random.default_rng(4)
+    w = torch.tensor(rng.standard_normal((mesh.n_vertices, 3)))
+    T = torch.tensor(t, requires_grad=True)
+    (layer(T) * w).sum().backward()
+    assert layer.last_info["converged"]
+    D = rng.standard_normal(t.shape)
+    eps = 1e-5
+    f = [float((layer(torch.tensor(t + s * D)) * w).sum()) for s in (eps, -eps)]
+    fd = (f[0] - f[1]) / (2 * eps)
+    assert float((T.grad.numpy() * D).sum()) == pytest.approx(fd, rel=1e-4)

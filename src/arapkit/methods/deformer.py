@@ -510,7 +510,8 @@ class Deformer:
     def neighbourhoods(self) -> Neighbourhoods:
         """The neighbourhoods in use, relabelled to the mesh's vertex numbering.
 
-        No search is repeated: the solver's structure is permuted.
+        No search is repeated: the solver's structure is permuted. Edge ids index
+        ``mesh.edges``; Smooth ARAP's ids past them are its vertex pairs two rings apart.
         """
         p = self._local_global("neighbourhoods")
         nbh = p.energy.nbh
