@@ -91,8 +91,10 @@ def _variants() -> list[Variant]:
 def _expressible(v: Variant, interface: str) -> bool:
     can = method(v.energy)
     if interface == "compare":  # runs its fixed set: nothing to ask, nothing to refuse
+        from arapkit.workflows.compare import RINGS_METHOD
+
         return interface in can.interfaces and v.refusal(interface) is None \
-            and v.init == "identity"
+            and v.init == "identity" and (v.rings == "1" or v.energy == RINGS_METHOD)
     if interface == "editor":  # the painted map is ignored by methods without one
         return interface in can.interfaces and v.init == "identity" and (
             v.rings == "1" or can.rigidity_map) and (not v.volumetric or can.volumetric)

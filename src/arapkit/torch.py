@@ -183,9 +183,9 @@ class ARAPLayer(_torch.nn.Module):
         r per vertex (rigidity), held fixed.
     weights : str
         Edge weighting (default :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`).
-    energy : {"rring", "spokes-and-rims"}
+    energy : {"rring", "spokes-and-rims", "smooth-arap"}
         The local/global energy (SR-ARAP's rotation coupling has no fixed point of one
-        step alone and is not offered here).
+        step alone and is not offered here). Smooth ARAP runs at its default lambda.
     tol, max_iter :
         The forward's stopping test, as for :class:`arapkit.Deformer`. Each pose of a
         batch stops when it passes the test itself, so it gets the answer (and iteration

@@ -231,7 +231,7 @@ class ARAPProblem:
         t0 = time.perf_counter()
         r = check_rings(rings, self.n_vertices)
         # the energy's own options (a ring scale) hold for the new map too
-        en = make_energy("rring", self.graph, self.w, self.weights_kind, rings=r,
+        en = make_energy(self.energy.name, self.graph, self.w, self.weights_kind, rings=r,
                          perm=self.perm, **self.energy.options)
         return self.with_energy(en, 1e3 * (time.perf_counter() - t0))
 
@@ -251,10 +251,12 @@ class ARAPProblem:
         """Rest positions, internal numbering."""
         return self.graph.vertices
 
-    @property
+    @cached_property
     def edges(self) -> np.ndarray:
-        """Edges, internal numbering."""
-        return self.graph.edges
+        """The pairs the energy's terms couple, internal numbering: the graph's edges, then
+        any the energy adds past them (:attr:`NeighbourhoodEnergy.extra_edges`)."""
+        extra = self.energy.extra_edges
+        return self.graph.edges if extra is None else np.concatenate([self.graph.edges, extra])
 
     @cached_property
     def constrained(self) -> np.ndarray:

@@ -97,8 +97,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--energy",
         default="rring",
         metavar="NAME",
-        help="method: rring (r-ring ARAP, default), spokes-and-rims, sr-arap, embedded "
-        "(see docs/methods.md)",
+        help="method: rring (r-ring ARAP, default), spokes-and-rims, sr-arap, smooth-arap "
+        "(no spike under a single-vertex handle), embedded (see docs/methods.md)",
     )
     p.add_argument(
         "--nodes",
@@ -109,6 +109,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--sr-alpha",
         metavar="A",
         help="SR-ARAP rotation-smoothness weight, times the surface area (default 0.02)",
+    )
+    p.add_argument(
+        "--smooth-lambda",
+        metavar="L",
+        help="Smooth ARAP: weight of the Laplacian term, in [0, 1) (default 0.99; 0 is ARAP)",
     )
     p.add_argument(
         "--tol",
@@ -170,7 +175,8 @@ def _check_method(args: argparse.Namespace) -> dict[str, Any]:
     from arapkit.methods.deformer import check_method
     from arapkit.methods.registry import method
 
-    options = check_method(args.energy, args.sr_alpha, args.nodes)
+    options = check_method(args.energy, args.sr_alpha, args.nodes,
+                           smooth_lambda=args.smooth_lambda)
     can = method(args.energy, "cli")
     if not can.rigidity_map and (args.rings_file or args.rings != 1):
         raise InputError(f"--energy {args.energy}: has no rigidity map (drop --rings/--rings-file)")
@@ -178,7 +184,8 @@ def _check_method(args: argparse.Namespace) -> dict[str, Any]:
         raise InputError(f"--accelerate: not available with --energy {args.energy} "
                          "(only for the local/global descent methods)")
     args._method_options = options
-    return {"energy": args.energy, "sr_alpha": args.sr_alpha, "nodes": args.nodes}
+    return {"energy": args.energy, "sr_alpha": args.sr_alpha, "nodes": args.nodes,
+            "smooth_lambda": args.smooth_lambda}
 
 
 # -- volumetric ARAP (arapkit.methods.volumetric) -------------------------------------------------
@@ -380,11 +387,12 @@ def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
     from arapkit.workflows.jobs import describe_rings
 
     info = method(args.energy)
-    if info.rigidity_map:
-        return f"r = {describe_rings(r)}"
     opts = _method_options(args)
     shown = [o.describe.format(opts[k]) for k, o in info.options.items()
              if o.describe is not None and k in opts]
+    if info.rigidity_map:
+        # r-ring ARAP is named by its r alone; a method with options of its own says which
+        return ", ".join([*([info.label, *shown] if shown else []), f"r = {describe_rings(r)}"])
     return ", ".join([info.label, *shown])
 
 

@@ -39,6 +39,7 @@ from ..arap.backends import DEVICES, check_device, make_backend  # noqa: F401 - 
 from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
 from ..arap.energies import energy_info
 from ..arap.energies.rring import check_ring_scale
+from ..arap.energies.smooth_arap import DEFAULT_LAMBDA, check_smooth_lambda
 from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
 from ..arap.graph import bandwidth_order, unit_scale
 from ..arap.loop import Result, local_global, start_energy, with_progress
@@ -66,9 +67,9 @@ def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
     that holds for descent methods alone.
     """
     en = energy_info(name)
-    return MethodInfo(name, label, local_global=True, descent=en.descent,
-                      rigidity_map=en.rigidity_map, accelerate=en.descent,
-                      multires=en.descent, **kw)
+    facts = {"descent": en.descent, "rigidity_map": en.rigidity_map,
+             "accelerate": en.descent, "multires": en.descent}
+    return MethodInfo(name, label, local_global=True, **(facts | kw))
 
 
 register(_local_global_method("rring", "r-ring ARAP", volumetric=True))
@@ -82,21 +83,32 @@ register(_local_global_method(
              "sr_roi": MethodOption("roi", None, lambda roi: roi)},
     interfaces=frozenset(INTERFACES) - {"torch"},
     why_not={"torch": "its rotation coupling has no per-step fixed point"}))
+register(_local_global_method(
+    "smooth-arap", "Smooth ARAP",
+    options={"smooth_lambda": MethodOption("smooth_lambda", DEFAULT_LAMBDA,
+                                           check_smooth_lambda, "lambda = {:g}")},
+    # coarse to fine counts r on the proxy with a ring scale, which this energy lacks,
+    # and the tetrahedra have no Laplacian term (it needs the surface's triangles)
+    multires=False))
 
 
-def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None) -> dict:
+def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None,
+                 smooth_lambda=None) -> dict:
     """Validate a method name and its options; return the method's options.
 
     Examples
     --------
     >>> check_method("sr-arap", "0.1")
     {'alpha': 0.1}
+    >>> check_method("smooth-arap")
+    {'smooth_lambda': 0.99}
     """
     names = method_names("library")
     if energy not in names:
         raise InputError(f"unknown energy '{energy}' (use one of {', '.join(names)})")
     info = method(energy)
-    given = {"sr_alpha": sr_alpha, "nodes": nodes, "sr_roi": sr_roi}
+    given = {"sr_alpha": sr_alpha, "nodes": nodes, "sr_roi": sr_roi,
+             "smooth_lambda": smooth_lambda}
     for name, value in given.items():
         if value is not None and name not in info.options:
             owner = next(m.name for m in methods("library") if name in m.options)
@@ -123,7 +135,8 @@ def register_variant(flag: str, cls: type) -> type:
     """Make ``Deformer(..., <flag>=True)`` return ``cls(mesh, handles, rings, **options)``.
 
     ``cls`` takes the Deformer's keyword options, less the method's (``energy``,
-    ``sr_alpha``, ``sr_roi``, ``nodes``), which :class:`Deformer` checks first.
+    ``sr_alpha``, ``sr_roi``, ``nodes``, ``smooth_lambda``), which :class:`Deformer`
+    checks first.
 
     Examples
     --------
@@ -196,10 +209,12 @@ class Deformer:
         ``energy="rring"``.
     weights : {"cotan", "cotan-clamped", "cotan-clamped-each", "uniform"}
         Edge weights (see :mod:`arapkit.mesh.weights`).
-    energy : {"rring", "spokes-and-rims", "sr-arap", "embedded"}
+    energy : {"rring", "spokes-and-rims", "sr-arap", "smooth-arap", "embedded"}
         The method (see ``docs/methods.md``): r-ring ARAP (Chen et al. 2017),
         spokes-and-rims ARAP (Chao et al. 2010), smooth-rotation ARAP (Levi & Gotsman
-        2014) or embedded deformation (Sumner et al. 2007, :mod:`arapkit.methods.embedded`).
+        2014), Smooth ARAP (Oehri et al. 2025: no spike under a single-vertex handle,
+        ``docs/smooth-arap.md``) or embedded deformation (Sumner et al. 2007,
+        :mod:`arapkit.methods.embedded`).
     sr_alpha : float, optional
         SR-ARAP's rotation-smoothness weight (default 0.02, CGAL's), scaled by the surface
         area as CGAL does.
@@ -211,6 +226,9 @@ class Deformer:
         rotation is coupled to all its neighbours' (``docs/methods.md``).
     nodes : int, optional
         Embedded deformation's graph size (default 200, at most the vertex count).
+    smooth_lambda : float, optional
+        Smooth ARAP's weight of the Laplacian term, in [0, 1) (default 0.99, the paper's;
+        0 is ARAP): see :mod:`arapkit.arap.energies.smooth_arap`.
     ring_scale : float
         r is counted in the rings of a mesh whose edges are ``ring_scale`` times this
         one's (default 1: this mesh's own). A decimated copy of a mesh, solved with the
@@ -308,7 +326,7 @@ class Deformer:
                              "volume directly")
         energy = options.pop("energy", "rring")
         check_method(energy, options.pop("sr_alpha", None), options.pop("nodes", None),
-                     options.pop("sr_roi", None))
+                     options.pop("sr_roi", None), options.pop("smooth_lambda", None))
         if not method(energy).volumetric:
             raise InputError(f"volumetric=True runs r-ring ARAP; energy '{energy}' is for "
                              "surfaces")
@@ -332,6 +350,7 @@ class Deformer:
         sr_alpha: float | None = None,
         sr_roi=None,
         nodes: int | None = None,
+        smooth_lambda: float | None = None,
         ring_scale: float = 1.0,
         tol: float = 1e-3,
         max_iter: int = 1000,
@@ -343,7 +362,7 @@ class Deformer:
         device: str = "cpu",
     ) -> None:
         self.device = check_device(device)
-        options = check_method(energy, sr_alpha, nodes, sr_roi)
+        options = check_method(energy, sr_alpha, nodes, sr_roi, smooth_lambda)
         info = method(energy)
         self.ring_scale = check_ring_scale(ring_scale)
         if self.ring_scale != 1.0:
@@ -491,7 +510,8 @@ class Deformer:
     def neighbourhoods(self) -> Neighbourhoods:
         """The neighbourhoods in use, relabelled to the mesh's vertex numbering.
 
-        No search is repeated: the solver's structure is permuted.
+        No search is repeated: the solver's structure is permuted. Edge ids index
+        ``mesh.edges``; Smooth ARAP's ids past them are its vertex pairs two rings apart.
         """
         p = self._local_global("neighbourhoods")
         nbh = p.energy.nbh

@@ -11,7 +11,7 @@ Examples
 >>> method("sr-arap").rigidity_map
 False
 >>> [m.name for m in methods("torch")]
-['rring', 'spokes-and-rims']
+['rring', 'spokes-and-rims', 'smooth-arap']
 """
 
 from __future__ import annotations

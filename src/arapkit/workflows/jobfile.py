@@ -41,7 +41,8 @@ __all__ = ["JOB_KEYS", "dry_run", "job_hash", "job_spec", "load_jobs", "normalis
 
 #: Keys a job object may have (``mesh``, ``handles`` and ``output`` are required).
 JOB_KEYS = ("mesh", "handles", "transform", "rings", "rings_file", "weights", "energy",
-            "sr_alpha", "nodes", "weld", "tol", "max_iter", "init", "accelerate", "output")
+            "sr_alpha", "nodes", "smooth_lambda", "weld", "tol", "max_iter", "init",
+            "accelerate", "output")
 #: every optional key of :data:`JOB_KEYS` and its default
 _DEFAULTS = {k: JOB_DEFAULTS[k] for k in JOB_KEYS if k in JOB_DEFAULTS}
 
@@ -65,7 +66,8 @@ def _check_method(job: dict, where: str) -> None:
         raise InputError(f"{where}: energy {job['energy']} is not available in this build "
                          f"(available: {', '.join(ENERGIES)})")
     try:
-        check_method(job["energy"], job["sr_alpha"], job["nodes"])
+        check_method(job["energy"], job["sr_alpha"], job["nodes"],
+                     smooth_lambda=job["smooth_lambda"])
     except InputError as e:
         raise InputError(f"{where}: {e}") from None
 

@@ -49,8 +49,8 @@ def _solver_defaults() -> dict[str, Any]:
     """The :class:`arapkit.Deformer`'s own defaults: a job that leaves a parameter out
     solves as the library does, with no second copy of the values to drift."""
     params = inspect.signature(Deformer.__init__).parameters
-    names = ("rings", "weights", "energy", "sr_alpha", "nodes", "tol", "max_iter", "init",
-             "accelerate")
+    names = ("rings", "weights", "energy", "sr_alpha", "nodes", "smooth_lambda", "tol",
+             "max_iter", "init", "accelerate")
     return {name: params[name].default for name in names}
 
 
@@ -83,8 +83,8 @@ class DeformJob:
         As for :class:`arapkit.Deformer`.
     energy : str
         One of :data:`ENERGIES`.
-    sr_alpha, nodes : optional
-        Options of ``energy="sr-arap"`` and ``energy="embedded"``.
+    sr_alpha, nodes, smooth_lambda : optional
+        Options of ``energy="sr-arap"``, ``energy="embedded"`` and ``energy="smooth-arap"``.
     weld : float or None
         Merge vertices closer than this fraction of the bounding-box diagonal for the solve
         (:func:`arapkit.mesh.welding.weld`); handles, rings and the output refer to the input's
@@ -107,6 +107,7 @@ class DeformJob:
     energy: str = DEFAULT_ENERGY
     sr_alpha: float | None = _SOLVER["sr_alpha"]
     nodes: int | None = _SOLVER["nodes"]
+    smooth_lambda: float | None = _SOLVER["smooth_lambda"]
     weld: float | None = None
     volumetric: bool = False
     interior_density: float | None = None
@@ -252,6 +253,7 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
         energy=job.energy,
         sr_alpha=job.sr_alpha,
         nodes=job.nodes,
+        smooth_lambda=job.smooth_lambda,
         **({"volumetric": True, "density": job.interior_density} if job.volumetric else {}),
     )
     for msg in deformer.notes:
@@ -298,7 +300,8 @@ def method_description(job: DeformJob) -> dict[str, Any]:
     """
     from ..methods.deformer import check_method
 
-    options = check_method(job.energy, job.sr_alpha, job.nodes)
+    options = check_method(job.energy, job.sr_alpha, job.nodes,
+                           smooth_lambda=job.smooth_lambda)
     return {"energy": job.energy,
             **{("sr_alpha" if k == "alpha" else k): v for k, v in options.items()}}
 
