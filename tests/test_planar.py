@@ -119,15 +119,19 @@ def test_planar_solve_equals_the_3d_solve_without_folds(small, energy, rings, we
     h, T = bend(small, -0.3, 0.8)
     r = np.where(small.vertices[:, 0] < 1.5, 1, 3) if rings == "mixed" else rings
     kw = dict(rings=r, weights=weights, energy=energy, tol=1e-10, max_iter=3000)
-    two = Deformer(small, h, **kw)
+    # the guard off: the same iterates as 3D (the guard would keep the pins from snapping
+    # where that alone folds a triangle, a different path to the same minimum)
+    two = Deformer(small, h, flips="allow", **kw)
     three = Deformer(small, h, dim=3, **kw)
     assert two.dim == 2 and three.dim == 3
     a = two.solve(T)
     b = three.solve(np.c_[T, np.zeros(len(T))])
     assert a.folds == 0 and a.rotations.shape == (small.n_vertices, 2, 2)
     assert np.abs(a.vertices[:, 2]).max() == 0.0
-    assert np.abs(a.vertices - b.vertices).max() < 1e-7
-    assert a.energy == pytest.approx(b.energy, rel=1e-6)
+    assert np.abs(a.vertices - b.vertices).max() < 1e-9
+    assert a.energy == pytest.approx(b.energy, rel=1e-9)
+    guarded = Deformer(small, h, **kw).solve(T)  # and the guarded path's minimum
+    assert np.abs(guarded.vertices - b.vertices).max() < 1e-4
 
 
 @pytest.mark.parametrize("r", [1, 2])
@@ -161,8 +165,10 @@ def test_energy_never_increases_with_the_flip_guard():
     T[len(left):, 0] -= 3.5  # a hard push: the guard is busy
     for accelerate in (False, True):
         res = Deformer(m, h, accelerate=accelerate).solve(T, tol=1e-7, max_iter=400)
-        H = np.array(res.history)
-        assert res.folds == 0
+        # the pins travel first (snapped at once they would fold the end's triangles):
+        # from their landing on, one problem, and its energy never rises
+        H = np.array(res.history)[res.timings["pins_landed_at"]:]
+        assert res.folds == 0 and len(H) > 20
         assert np.all(np.diff(H) <= 1e-10 * H[0]), np.diff(H).max()
 
 

@@ -260,7 +260,10 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
     nf = len(free)
     d = problem.dim
     C = problem.constrained_targets(targets)
-    fixed_rhs = np.ascontiguousarray(el.A_fc @ C) if nf else np.zeros((0, d))
+
+    def coupling(C_held: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(el.A_fc @ C_held) if nf else np.zeros((0, d))
+
     coupled = problem.energy.coupling is not None
     # a rotation per owner: the vertices first, then any of their own (triangles)
     K = problem.energy.n_owners
@@ -274,6 +277,8 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         R[:] = np.eye(d)
         if guard is None or guard.begin(P, cons, C):
             P[cons] = C
+        C_held = C if guard is None else guard.now  # travelling pins: where they are
+        fixed_rhs = coupling(C_held)
         rhs[:] = problem.b_rest[free, :d] - fixed_rhs
     else:
         t0 = time.perf_counter()
@@ -282,7 +287,11 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
             P0 = np.asarray(start, dtype=np.float64)[problem.perm] / start_units
             snap = guard.begin(P0, cons, C)
             start, start_units = P0[inv], 1.0
+        C_held = C if guard is None else guard.now
+        fixed_rhs = coupling(C_held)
         P, E_prev = start_energy(problem, backend, start, start_units, C, R, R_prev, snap)
+        if guard is not None:
+            E_prev += guard.barrier(P)
         check_finite(E_prev, 0)
         backend.rhs(fixed_rhs, rhs)
         t_local += time.perf_counter() - t0
@@ -291,6 +300,7 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
     g = np.empty((nf, d))
     x_aa = np.empty((nf, d))
     hist: list[float] = []
+    landed_at = 0
     converged = False
     rejected = 0
     plain_next = False
@@ -301,8 +311,13 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         t0 = time.perf_counter()
         if nf:
             backend.solve(rhs, g)  # g = G(x)
-        if guard is not None:  # the fold-free fraction of the step (module flips)
-            guard.limit(P, g, free, cons, C)
+        if guard is not None:  # the guarded step (module flips)
+            guard.limit(P, g, free, cons, C, E_prev, R_prev)
+            if guard.now is not C_held:  # travelling pins moved on
+                C_held = guard.now
+                fixed_rhs = coupling(C_held)
+                E_prev = None  # another problem: no comparison across the move
+                landed_at = it if guard.landed else 0
         t1 = time.perf_counter()
         t_global += t1 - t0
         if coupled:  # the rotation coupling reads the last iteration's rotations
@@ -317,6 +332,8 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
             if y is not None and not plain_next:
                 backend.scatter(x_aa, free, P)
                 E_try = backend.local(P, R, R_prev)
+                if guard is not None:
+                    E_try += guard.barrier(P)
                 # safeguard: keep only energy-lowering (and, guarded, fold-free) extrapolations
                 if E_try < E_prev and (guard is None or guard.admits(P)):
                     accelerated = True
@@ -329,6 +346,8 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         if E is None:
             backend.scatter(g, free, P)
             E = backend.local(P, R, R_prev)
+            if guard is not None:
+                E += guard.barrier(P)
             if aa is not None:
                 x, g = g, x
         if it < max_iter:
@@ -376,6 +395,8 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
     folds = None if guard is None else guard.folds(P)
     if guard is not None and guard.released:
         timings["flip_guard_released"] = 1
+    if guard is not None and landed_at:
+        timings["pins_landed_at"] = landed_at  # the pins travelled: history index of landing
     V, Rv = P[inv], R[inv]
     if problem.free_components == "follow" and len(problem.fixed_extra):
         # components without handles: energy 0 at rest and under any rigid motion; place

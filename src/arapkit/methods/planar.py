@@ -245,7 +245,7 @@ class PlanarSolver:
             return local_global(self._twin[1], self._twin[2], T, start, **loop)
         backend.hold_rotations(*pin_neighbourhoods(problem, handles, angles)
                                if angles is not None else (None, None))
-        guard = FlipGuard(problem, prevent=self.flips == "prevent")
+        guard = FlipGuard(problem, backend, prevent=self.flips == "prevent")
         res = local_global(problem, backend, T, start, guard=guard, **loop)
         res.vertices = self.shape.to_caller(res.vertices)
         return res
