@@ -204,8 +204,10 @@ class FlipGuard:
         self.sign = np.where(np.abs(A0) > tiny, np.sign(A0), 0.0)
         self.A0 = np.maximum(np.abs(A0), tiny)
         self.floor = FLOOR * self.A0
+        self.zone = ZONE * self.A0
         self.zero = np.zeros(len(F))
         self.backend = backend
+        self._last_barrier = math.inf  # the loop's last barrier(P): P's own, reused
         self.prevent = bool(prevent) and backend is not None
         self.active = self.prevent
         self.landed = True
@@ -226,18 +228,23 @@ class FlipGuard:
         """The barrier's term of the guarded energy at P (0 when the guard is off)."""
         if not self.active:
             return 0.0
-        return float(barrier(P, self.faces, self.sign, self.A0, ZONE, WEIGHT, self._no_grad))
+        self._last_barrier = float(barrier(P, self.faces, self.sign, self.A0, ZONE, WEIGHT,
+                                           self._no_grad))
+        return self._last_barrier
 
     def begin(self, P: np.ndarray, cons: np.ndarray, C: np.ndarray) -> bool:
         """Whether the pins may be snapped onto ``C`` at the start (no new fold); if not,
         they stay where P has them (:attr:`now`) and travel toward ``C`` step by step."""
         self.now = C
+        self._last_barrier = math.inf
+        self.active, self.released = self.prevent, False  # a guard serves solve after solve
         if not self.active or not len(cons):
             self.landed = True
             return True
         Q = P.copy()
         Q[cons] = C
-        self.landed = self.folds(Q) <= self.folds(P)
+        after = self.folds(Q)
+        self.landed = after == 0 or after <= self.folds(P)
         if not self.landed:
             self.now = P[cons].copy()
         self._gap_mark = math.inf
@@ -257,7 +264,8 @@ class FlipGuard:
         self._before = P.copy()
         x = self._before[free]
         squeezed = False
-        if float(barrier(P, self.faces, self.sign, self.A0, ZONE, WEIGHT, self._no_grad)) > 0:
+        B = self._last_barrier if math.isfinite(self._last_barrier) else self.barrier(P)
+        if B > 0:  # the loop's barrier(P), or P's own at the first step
             # d = (g - x) - A^{-1} mu grad B / 2: the barrier's share with the same factor
             G = np.zeros_like(P)
             barrier(P, self.faces, self.sign, self.A0, ZONE, WEIGHT, G)
@@ -265,9 +273,9 @@ class FlipGuard:
             squeezed = True
         Q = P.copy()
         Q[free] = g
-        reach = max_step(P, Q, self.faces, self.sign, self.zero)
-        if squeezed or reach <= 1.0 or max_step(
-                P, Q, self.faces, self.sign, ZONE * self.A0) <= 1.0:
+        # reaching the zone comes before turning over: one test in the common case
+        if squeezed or max_step(P, Q, self.faces, self.sign, self.zone) <= 1.0:
+            reach = max_step(P, Q, self.faces, self.sign, self.zero)
             a = min(1.0, 0.9 * reach)
             if E_prev is not None and math.isfinite(E_prev):
                 a = self._backtrack(P, x, g - x, free, a, E_prev, R_prev)
@@ -304,7 +312,7 @@ class FlipGuard:
         Qn = Pn.copy()
         Qn[free] += u
         Qn[cons] = C
-        b = min(1.0, max_step(Pn, Qn, self.faces, self.sign, ZONE * self.A0))
+        b = min(1.0, max_step(Pn, Qn, self.faces, self.sign, self.zone))
         g += b * u
         self.now = C if b >= 1.0 else self.now + b * dC
         P[cons] = self.now

@@ -32,8 +32,8 @@ import numpy as np
 __all__ = ["boundary_edges", "premultiplied", "rasterise", "triangle_depths"]
 
 
-@nb.njit(cache=True, inline="always")
-def _sample(src, u, v, out):
+@nb.njit(cache=True, inline="always", fastmath=True)
+def _sample(src, u, v):
     # bilinear, pixel centres at half integers, clamped at the borders
     H, W = src.shape[0], src.shape[1]
     fx = min(max(u - 0.5, 0.0), W - 1.0)
@@ -41,10 +41,13 @@ def _sample(src, u, v, out):
     x0, y0 = int(fx), int(fy)
     x1, y1 = min(x0 + 1, W - 1), min(y0 + 1, H - 1)
     ax, ay = fx - x0, fy - y0
-    for c in range(4):
-        top = src[y0, x0, c] * (1.0 - ax) + src[y0, x1, c] * ax
-        bot = src[y1, x0, c] * (1.0 - ax) + src[y1, x1, c] * ax
-        out[c] = top * (1.0 - ay) + bot * ay
+    w00, w01 = (1.0 - ax) * (1.0 - ay), ax * (1.0 - ay)
+    w10, w11 = (1.0 - ax) * ay, ax * ay
+    p, q, r, t = src[y0, x0], src[y0, x1], src[y1, x0], src[y1, x1]
+    return (w00 * p[0] + w01 * q[0] + w10 * r[0] + w11 * t[0],
+            w00 * p[1] + w01 * q[1] + w10 * r[1] + w11 * t[1],
+            w00 * p[2] + w01 * q[2] + w10 * r[2] + w11 * t[2],
+            w00 * p[3] + w01 * q[3] + w10 * r[3] + w11 * t[3])
 
 
 @nb.njit(cache=True, inline="always")
@@ -58,7 +61,6 @@ def _top_left(ax, ay, bx, by):
 @nb.njit(cache=True, nogil=True)
 def _draw(acc, src, X, U, F, order, outline):
     H, W = acc.shape[0], acc.shape[1]
-    s = np.empty(4)
     for q in range(order.shape[0]):
         t = order[q]
         i0, i1, i2 = F[t, 0], F[t, 1], F[t, 2]
@@ -66,52 +68,78 @@ def _draw(acc, src, X, U, F, order, outline):
         area = (x1 - x0) * (y2 - y0) - (y1 - y0) * (x2 - x0)
         if area == 0.0 or not math.isfinite(area):
             continue
+        o0, o1, o2 = outline[t, 1], outline[t, 2], outline[t, 0]
         if area < 0.0:  # clockwise on screen: walk it the other way
             i1, i2 = i2, i1
             x1, y1, x2, y2 = x2, y2, x1, y1
             area = -area
-        # outline flags of the edges opposite corners 0, 1, 2 (as ordered now)
-        o0 = outline[t, 1]
-        o1 = outline[t, 2] if F[t, 1] == i1 else outline[t, 0]
-        o2 = outline[t, 0] if F[t, 1] == i1 else outline[t, 2]
+            o1, o2 = o2, o1
         pad = 1.0 if (o0 or o1 or o2) else 0.0
         lo_x = max(0, int(math.floor(min(x0, x1, x2) - pad)))
         hi_x = min(W - 1, int(math.ceil(max(x0, x1, x2) + pad)))
         lo_y = max(0, int(math.floor(min(y0, y1, y2) - pad)))
         hi_y = min(H - 1, int(math.ceil(max(y0, y1, y2) + pad)))
-        l0 = math.hypot(x2 - x1, y2 - y1)
-        l1 = math.hypot(x0 - x2, y0 - y2)
-        l2 = math.hypot(x1 - x0, y1 - y0)
+        if lo_x > hi_x or lo_y > hi_y:
+            continue
+        # edge functions w_c (twice the sub-triangle areas) are affine in the pixel centre:
+        # w_c = a_c x + b_c y + c_c, stepped by a_c along a row
+        a0, b0 = -(y2 - y1), x2 - x1
+        a1, b1 = -(y0 - y2), x0 - x2
+        a2, b2 = -(y1 - y0), x1 - x0
+        c0 = -(a0 * x1 + b0 * y1)
+        c1 = -(a1 * x2 + b1 * y2)
+        c2 = -(a2 * x0 + b2 * y0)
+        inv0 = 1.0 / math.hypot(a0, b0) if o0 else 0.0
+        inv1 = 1.0 / math.hypot(a1, b1) if o1 else 0.0
+        inv2 = 1.0 / math.hypot(a2, b2) if o2 else 0.0
         tl0, tl1, tl2 = _top_left(x1, y1, x2, y2), _top_left(x2, y2, x0, y0), \
             _top_left(x0, y0, x1, y1)
+        ia = 1.0 / area
+        # the rest position is affine in the pixel centre too
+        u0, v0 = U[i0, 0], U[i0, 1]
+        du1, dv1 = U[i1, 0] - u0, U[i1, 1] - v0
+        du2, dv2 = U[i2, 0] - u0, U[i2, 1] - v0
         for py in range(lo_y, hi_y + 1):
             cy = py + 0.5
+            cx = lo_x + 0.5
+            w0 = a0 * cx + b0 * cy + c0
+            w1 = a1 * cx + b1 * cy + c1
+            w2 = a2 * cx + b2 * cy + c2
             for px in range(lo_x, hi_x + 1):
-                cx = px + 0.5
-                # twice the areas of the sub-triangles: barycentric weights times 2A
-                w0 = (x2 - x1) * (cy - y1) - (y2 - y1) * (cx - x1)
-                w1 = (x0 - x2) * (cy - y2) - (y0 - y2) * (cx - x2)
-                w2 = (x1 - x0) * (cy - y0) - (y1 - y0) * (cx - x0)
                 cov = 1.0
                 ok = True
-                for w, o, ln, tl in ((w0, o0, l0, tl0), (w1, o1, l1, tl1), (w2, o2, l2, tl2)):
-                    if o:
-                        d = w / ln  # signed distance to the outline edge, in pixels
-                        if d < 0.5:
-                            cov *= max(0.0, d + 0.5)
-                    elif w < 0.0 or (w == 0.0 and not tl):
-                        ok = False
-                if not ok or cov <= 0.0:
-                    continue
-                b0, b1, b2 = w0 / area, w1 / area, w2 / area
-                u = b0 * U[i0, 0] + b1 * U[i1, 0] + b2 * U[i2, 0]
-                v = b0 * U[i0, 1] + b1 * U[i1, 1] + b2 * U[i2, 1]
-                _sample(src, u, v, s)
-                a = s[3] * cov
-                keep = 1.0 - a
-                for c in range(3):
-                    acc[py, px, c] = s[c] * cov + keep * acc[py, px, c]
-                acc[py, px, 3] = a + keep * acc[py, px, 3]
+                if o0:
+                    d = w0 * inv0
+                    if d < 0.5:
+                        cov *= max(0.0, d + 0.5)
+                elif w0 < 0.0 or (w0 == 0.0 and not tl0):
+                    ok = False
+                if o1:
+                    d = w1 * inv1
+                    if d < 0.5:
+                        cov *= max(0.0, d + 0.5)
+                elif w1 < 0.0 or (w1 == 0.0 and not tl1):
+                    ok = False
+                if o2:
+                    d = w2 * inv2
+                    if d < 0.5:
+                        cov *= max(0.0, d + 0.5)
+                elif w2 < 0.0 or (w2 == 0.0 and not tl2):
+                    ok = False
+                if ok and cov > 0.0:
+                    l1, l2 = w1 * ia, w2 * ia  # barycentric weights of corners 1 and 2
+                    r, g, b, al = _sample(src, u0 + l1 * du1 + l2 * du2,
+                                          v0 + l1 * dv1 + l2 * dv2)
+                    a = al * cov
+                    keep = 1.0 - a
+                    px_ = acc[py, px]
+                    px_[0] = r * cov + keep * px_[0]
+                    px_[1] = g * cov + keep * px_[1]
+                    px_[2] = b * cov + keep * px_[2]
+                    px_[3] = a + keep * px_[3]
+                w0 += a0
+                w1 += a1
+                w2 += a2
 
 
 def boundary_edges(F: np.ndarray) -> np.ndarray:
@@ -155,9 +183,9 @@ def _finish(acc, out):
 
 
 def premultiplied(src: np.ndarray) -> np.ndarray:
-    """``(H, W, 4)`` float64 premultiplied RGBA in [0, 1] of a uint8 RGBA picture (what
+    """``(H, W, 4)`` float32 premultiplied RGBA in [0, 1] of a uint8 RGBA picture (what
     :func:`rasterise` samples; a caller that draws many frames converts once)."""
-    s = src.astype(np.float64) / 255.0
+    s = src.astype(np.float32) / np.float32(255.0)
     s[..., :3] *= s[..., 3:4]
     return s
 
@@ -189,9 +217,9 @@ def rasterise(src: np.ndarray, rest: np.ndarray, deformed: np.ndarray, faces: np
     """
     H, W = (src.shape[0], src.shape[1]) if size is None else size
     s = premultiplied(src) if src.dtype == np.uint8 else src
-    acc = np.zeros((H, W, 4), dtype=np.float64)
+    acc = np.zeros((H, W, 4), dtype=np.float32)
     if background is not None:
-        bg = np.asarray(background, dtype=np.float64) / 255.0
+        bg = np.asarray(background, dtype=np.float32) / np.float32(255.0)
         a = bg[3] if len(bg) == 4 else 1.0
         acc[..., :3] = bg[:3] * a
         acc[..., 3] = a

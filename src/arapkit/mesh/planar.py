@@ -125,11 +125,18 @@ class PlanarInput:
             raise InputError(f"{name}: expected shape (h, 2) or (h, 3), got {T.shape}")
         if T.shape[1] == 2:
             return T
-        V = self.mesh.vertices
-        ext = max(float(np.max(V.max(axis=0) - V.min(axis=0))), 1e-300)
-        if len(T) and np.abs(T[:, 2] - self.z).max() > PLANAR_TOL * ext:
+        if len(T) and np.abs(T[:, 2] - self.z).max() > PLANAR_TOL * self.extent:
             return None
         return T[:, :2]
+
+    @property
+    def extent(self) -> float:
+        """The largest side of the bounding box (found once: every frame of a drag asks)."""
+        if "_extent" not in self.__dict__:
+            V = self.mesh.vertices
+            object.__setattr__(self, "_extent",
+                               max(float(np.max(V.max(axis=0) - V.min(axis=0))), 1e-300))
+        return self.__dict__["_extent"]
 
     def to_caller(self, P: np.ndarray) -> np.ndarray:
         """``(n, 2)`` solver positions in the caller's dimension (z of the plane added)."""

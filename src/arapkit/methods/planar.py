@@ -231,6 +231,7 @@ class PlanarSolver:
         self.flips = check_flips(flips)
         self.device = device
         self._twin = None  # (2D problem, its 3D twin, the twin's backend)
+        self._guard = None  # (problem, backend, its flip guard): built once, reused
 
     def solve(self, problem, backend, handles: np.ndarray, T: np.ndarray, start, angles,
               **loop) -> Result:
@@ -245,7 +246,10 @@ class PlanarSolver:
             return local_global(self._twin[1], self._twin[2], T, start, **loop)
         backend.hold_rotations(*pin_neighbourhoods(problem, handles, angles)
                                if angles is not None else (None, None))
-        guard = FlipGuard(problem, backend, prevent=self.flips == "prevent")
+        if self._guard is None or self._guard[0] is not problem or self._guard[1] is not backend:
+            self._guard = (problem, backend, FlipGuard(problem, backend,
+                                                       prevent=self.flips == "prevent"))
+        guard = self._guard[2]
         res = local_global(problem, backend, T, start, guard=guard, **loop)
         res.vertices = self.shape.to_caller(res.vertices)
         return res

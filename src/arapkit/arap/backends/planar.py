@@ -97,6 +97,13 @@ def local_step_2d(P, chunk_ptr, disk_ptr, disk_idx, coef, up_ptr, up_idx, up_w, 
         partial[c, 1] = quad
 
 
+#: below this many rotations the local step runs on one thread: a parallel region costs a
+#: scheduler slice whenever another process holds a core, more than the work of a 10K-vertex
+#: sprite (about 0.3 ms); above it the threads pay
+SERIAL_BELOW = 50_000
+local_step_2d_serial = nb.njit(cache=True, nogil=True)(local_step_2d.py_func)
+
+
 @nb.njit(cache=True, nogil=True)
 def gather_rhs_2d(buf, win_lo, win_off, chunk_ptr, cover_ptr, cover_idx, slot, fixed_rhs, rhs):
     """``rhs[slot[v]] = b_v - (A_fc C)_v`` for free v (the 2D form of the CPU backend's)."""
@@ -196,7 +203,9 @@ class PlanarBackend(CPUBackend):
         """Fit 2 x 2 rotations to P (in place in R), scatter the right-hand side; return
         E(P, R)."""
         nbh = self.problem.energy.nbh
-        local_step_2d(P, self.chunk_ptr, nbh.disk_ptr, nbh.disk_idx, self.coef,
+        kernel = local_step_2d_serial if len(self.coef) and self.problem.energy.n_owners \
+            < SERIAL_BELOW else local_step_2d
+        kernel(P, self.chunk_ptr, nbh.disk_ptr, nbh.disk_idx, self.coef,
                       self.up_ptr, self.up_idx, self.up_w, R, self.buf,
                       self.win_lo, self.win_off, self.partial,
                       self.rc_ptr, self.rc_idx, self.rc_w, R_prev, self.centres, self.held)
