@@ -38,10 +38,12 @@ import numpy as np
 from ..errors import InputError, require_extra
 from ..mesh.model import Mesh
 
-__all__ = ["DEFAULT_CELLS", "default_spacing", "mesh_mask", "shape_mask"]
+__all__ = ["DEFAULT_CELLS", "MAX_VERTICES", "default_spacing", "mesh_mask", "shape_mask"]
 
 #: the default spacing is the shape's longer side over this many cells
 DEFAULT_CELLS = 40
+#: the most vertices a density may ask for (memory and time stay bounded)
+MAX_VERTICES = 2_000_000
 
 
 def shape_mask(rgba: np.ndarray, *, alpha_threshold: int = 0, key=None, key_tol: float = 32.0,
@@ -165,6 +167,10 @@ def mesh_mask(mask: np.ndarray, spacing: float | None = None, pins=None,
         raise InputError(f"density: the spacing must be a positive number of pixels, got "
                          f"{spacing}")
     h = max(h, 1.0)
+    estimate = float(mask.sum()) / (0.866 * h * h)
+    if estimate > MAX_VERTICES:
+        raise InputError(f"density: {h:g} px would give about {estimate:,.0f} vertices (at "
+                         f"most {MAX_VERTICES:,}); use a coarser density")
     parts = _polygons(mask, h)
     if not parts:
         raise InputError(f"{name}: the shape is smaller than one mesh cell ({h:g} px); "
