@@ -28,6 +28,7 @@ from arapkit.methods.registry import (
     VOLUMETRIC_INTERFACES,
     method,
     method_names,
+    methods,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -411,3 +412,112 @@ def test_batch_report_command_reproduces_the_job(folder, capsys):
     argv = command[1:command.index("-o")] + ["-o", str(again), "-q", "--force"]
     assert main(argv) == 0, capsys.readouterr().err
     assert np.array_equal(_ply(again), _ply(folder / "batch" / "cmd.ply"))
+
+
+# ------------------------------------------------------------------------ the 2D rows
+# (issue 48) every method the registry marks ``planar`` through each door that offers it, on
+# a planar mesh: solved in its plane, handles met, no triangle turned over; and the doors
+# that are 2D only: warp (library and command line) and the 2D editor.
+
+PLANAR = [m.name for m in methods() if m.planar]
+PLANAR_DOORS = ("library", "cli", "batch", "editor", "torch")
+
+
+@cache
+def _planar_case(folder: Path):
+    from arapkit.io import save_mesh
+    from arapkit.mesh.shapes2d import strip, strip_ends
+
+    m = strip(segments=(24, 6))
+    left, right = strip_ends(m)
+    V = m.vertices
+    path = folder / "strip.obj"
+    save_mesh(path, V, m.faces)
+    hpath = folder / "strip-handles.json"
+    hpath.write_text(json.dumps([
+        {"name": "held", "indices": left.tolist()},
+        {"name": "bent", "indices": right.tolist(), "translate": [-1.0, 1.5, 0.0]}]))
+    return m, path, hpath, load_handles(hpath, V)
+
+
+def _check_planar(m, hs, V: np.ndarray) -> None:
+    from arapkit.mesh.planar import signed_areas
+
+    V = np.asarray(V, dtype=np.float64)
+    assert np.isfinite(V).all() and V.shape[0] == m.n_vertices
+    if V.shape[1] == 3:
+        assert np.abs(V[:, 2]).max() == 0.0  # stayed in its plane
+    P = V[:, :2]
+    assert np.abs(P[hs.indices] - hs.targets[:, :2]).max() <= HARD_TOL * 5.0
+    assert np.abs(P - m.vertices[:, :2]).max() > 0.5
+    assert (signed_areas(P, m.faces) > 0).all()  # nothing turned over
+
+
+@pytest.mark.parametrize("energy, door", [(e, d) for e in PLANAR for d in PLANAR_DOORS
+                                          if d in method(e).interfaces],
+                         ids=lambda x: x)
+def test_door_2d(energy: str, door: str, folder: Path, capsys):
+    m, path, hpath, hs = _planar_case(folder)
+    if door == "library":
+        d = Deformer(m, hs.indices, energy=energy)
+        assert d.dim == 2
+        V = d.solve(hs.targets).vertices
+    elif door == "cli":
+        from arapkit.cli import main
+
+        out = folder / f"strip-{energy}.ply"
+        assert main(["deform", str(path), "--handles", str(hpath), "--energy", energy,
+                     "-o", str(out), "-q", "--force"]) == 0
+        V = _ply(out)
+    elif door == "batch":
+        pytest.importorskip("distributed", reason="batch jobs need arapkit[batch]")
+        from arapkit.workflows.batch import normalise_job, run_job
+
+        job = {"mesh": str(path), "handles": str(hpath), "energy": energy,
+               "output": f"strip-{energy}-batch.ply"}
+        row = run_job(normalise_job(job, folder), folder / "batch2d", resume=False)
+        assert row["status"] == "ok", row
+        V = _ply(folder / "batch2d" / job["output"])
+    elif door == "editor":
+        from arapkit.editor.settings import SolverSettings
+        from arapkit.editor.worker import SolveRequest, SolveWorker
+
+        updates = []
+        w = SolveWorker(updates.append)
+        w.start()
+        try:
+            w.submit(SolveRequest(m, hs.indices, hs.targets,
+                                  np.ones(m.n_vertices, np.int32),
+                                  SolverSettings(method=energy, max_iter=1000)))
+            assert w.wait_idle(300)
+        finally:
+            w.stop()
+        assert updates[-1].error is None, updates[-1].error
+        V = updates[-1].vertices
+    else:
+        torch = pytest.importorskip("torch", reason="PyTorch not installed")
+        from arapkit.torch import ARAPLayer
+
+        layer = ARAPLayer((m.vertices[:, :2], m.faces), hs.indices, energy=energy,
+                          dtype=torch.float64)
+        assert layer.planar
+        V = layer(torch.tensor(hs.targets[:, :2])).detach().numpy()
+        assert V.shape == (m.n_vertices, 2)
+    _check_planar(m, hs, V)
+
+
+def test_warp_door_2d(folder: Path, capsys):
+    """``warp_image`` and ``arapkit warp`` on the example sprite: the pins land."""
+    pytest.importorskip("pythoncdt", reason="the image extra is not installed")
+    from arapkit.cli import main
+    from arapkit.image.pins import load_pins
+    from arapkit.image.warp import ImageWarp
+
+    pins = load_pins(ROOT / "examples" / "puppet-pins.json")
+    w = ImageWarp(ROOT / "examples" / "puppet.png", pins.at)
+    res = w.frame(pins.to, pins.turned, max_iter=1000)
+    assert res.folds == 0 and np.abs(res.vertices[:len(pins.at)] - pins.to).max() < 1e-9
+    out = folder / "waved.png"
+    assert main(["warp", str(ROOT / "examples" / "puppet.png"), "--pins",
+                 str(ROOT / "examples" / "puppet-pins.json"), "-o", str(out)]) == 0
+    assert out.stat().st_size > 1000

@@ -145,8 +145,10 @@ def test_core_dependencies_carry_no_gui_or_plotting_stack():
     assert "matplotlib" in _names(extras["plots"])
     assert {"viser", "matplotlib"} <= _names(extras["editor"])
     # all: every extra but torch (.ci/run adds it) and the test tools
-    assert extras["all"] == ["arapkit[plots,editor,batch,volume]"]
-    assert set(extras) == {"plots", "editor", "batch", "torch", "volume", "all", "test"}
+    assert extras["all"] == ["arapkit[plots,editor,batch,volume,image]"]
+    assert set(extras) == {"plots", "editor", "batch", "torch", "volume", "image", "all",
+                           "test"}
+    assert {"pillow", "scikit-image", "shapely", "PythonCDT"} <= _names(extras["image"])
 
 
 def test_make_installs_every_extra_and_checks_the_layers_before_pytest():
@@ -155,3 +157,15 @@ def test_make_installs_every_extra_and_checks_the_layers_before_pytest():
     recipe = make.split("\ntest:", 1)[1].split("\n\n", 1)[0].splitlines()[1:]
     assert [line.split()[0] for line in recipe] == [
         "$(BIN)/ruff", "$(BIN)/lint-imports", "$(BIN)/python"]
+
+
+_IMAGE_LINE = ("arapkit: error: arapkit warp needs the image extra: "
+               "pip install 'arapkit[image]'\n")
+
+
+@pytest.mark.parametrize("blocked", [("PIL",), ("skimage",), ("shapely",), ("pythoncdt",)])
+def test_warp_without_the_image_extra_names_it(tmp_path, blocked):
+    proc = cli_without(blocked, "warp", EX / "puppet.png", "--pins", EX / "puppet-pins.json",
+                       "-o", tmp_path / "o.png")
+    assert (proc.returncode, proc.stderr, proc.stdout) == (2, _IMAGE_LINE, "")
+    assert not (tmp_path / "o.png").exists()

@@ -255,7 +255,10 @@ def test_shipped_handle_files_resolve():
     files = sorted((ROOT / "examples").rglob("*.json"))
     assert len(files) >= 5
     for f in files:
-        comment = json.loads(f.read_text()).get("comment", "")
+        data = json.loads(f.read_text())
+        if (isinstance(data, list) and data and "at" in data[0]) or "keyframes" in data:
+            continue  # the pins and keyframes of arapkit warp (docs/2d.md), not handles
+        comment = data.get("comment", "")
         meshes = re.findall(r"examples/(\w+\.off)", comment)
         assert meshes, f"{f.name}: its comment should name the mesh it is for"
         mesh = load_mesh(ROOT / "examples" / meshes[0])

@@ -38,14 +38,41 @@ from .validate import iteration_cap, tolerance
 __all__ = ["ARAPLayer", "arap_energy"]
 
 
-def _check_targets(T, system: TorchSystem, handles) -> tuple[_torch.Tensor, bool]:
-    """Targets as ``(B, h, 3)`` on the layer's device and dtype; whether a batch was given."""
+def planar_rotations(S: _torch.Tensor) -> _torch.Tensor:
+    """In-plane rotations ``(..., 3, 3)`` (a 2 x 2 turn, z kept) maximising ``tr(R S)``
+    over turns about z: the closed form of :mod:`arapkit.arap.rotations2d`, differentiable
+    by autograd (``(c, s) = (a, b) / |(a, b)|``, ``a = S_00 + S_11``, ``b = S_01 - S_10``).
+
+    Examples
+    --------
+    >>> import torch
+    >>> S = torch.tensor([[[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])
+    >>> planar_rotations(S)[0, :2, :2].tolist()  # a quarter turn
+    [[0.0, -1.0], [1.0, 0.0]]
+    """
+    a = S[..., 0, 0] + S[..., 1, 1]
+    b = S[..., 0, 1] - S[..., 1, 0]
+    h = _torch.sqrt(a * a + b * b)
+    none = h == 0
+    hs = _torch.where(none, _torch.ones_like(h), h)
+    c = _torch.where(none, _torch.ones_like(a), a / hs)
+    s = _torch.where(none, _torch.zeros_like(b), b / hs)
+    z, o = _torch.zeros_like(c), _torch.ones_like(c)
+    return _torch.stack([_torch.stack([c, -s, z], -1), _torch.stack([s, c, z], -1),
+                         _torch.stack([z, z, o], -1)], -2)
+
+
+def _check_targets(T, system: TorchSystem, handles, dim: int = 3
+                   ) -> tuple[_torch.Tensor, bool]:
+    """Targets as ``(B, h, dim)`` on the layer's device and dtype; whether a batch was
+    given."""
     h = len(handles)
     if not isinstance(T, _torch.Tensor):
         raise InputError(f"targets: expected a torch.Tensor of shape ({h}, 3) or (B, {h}, 3), "
                          f"got {type(T).__name__}")
-    if T.ndim not in (2, 3) or tuple(T.shape[-2:]) != (h, 3) or (T.ndim == 3 and not len(T)):
-        raise InputError(f"targets: expected shape ({h}, 3) or (B, {h}, 3), got "
+    if T.ndim not in (2, 3) or tuple(T.shape[-2:]) != (h, dim) or (T.ndim == 3
+                                                                    and not len(T)):
+        raise InputError(f"targets: expected shape ({h}, {dim}) or (B, {h}, {dim}), got "
                          f"{tuple(T.shape)}")
     if T.dtype != system.dtype:
         raise InputError(f"targets: dtype {T.dtype} does not match the layer's {system.dtype} "
@@ -111,7 +138,7 @@ class _ARAPSolve(_torch.autograd.Function):
             x = x_star.detach().requires_grad_(True)
             Tq = T.detach().requires_grad_(True)
             P = ts.assemble(x, ts.constrained(Tq))
-            b = ts.rhs(fit_rotations(ts.covariances(P)))[:, ts.free]
+            b = ts.rhs(layer.fit(ts.covariances(P)))[:, ts.free]
 
             def hess(u):  # (A - B) u
                 (Bu,) = _torch.autograd.grad(b, x, u, retain_graph=True)
@@ -197,6 +224,10 @@ class ARAPLayer(_torch.nn.Module):
         the positions and drowns in round-off below ``tol ~ 1e-13``; use ``xtol`` (with
         ``tol=0``) to converge the positions tightly, e.g. for finite-difference checks.
     dtype : torch.float32 or torch.float64
+    dim : {None, 2, 3}
+        2 solves a planar shape (``(n, 2)`` positions, or one z) in its plane: targets and
+        output ``(.., 2)`` for ``(n, 2)`` input, rotations turns about z (no folds through
+        3D); None: 2 for planar input, else 3 (as :class:`arapkit.Deformer`).
     device : "cpu", "cuda" or "cuda:N"
         Where the tensors and the factor live (fixed at construction; ``.to()`` does not
         move them).
@@ -223,12 +254,22 @@ class ARAPLayer(_torch.nn.Module):
     def __init__(self, mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS,
                  energy: str = "rring", tol: float = 1e-3, max_iter: int = 1000,
                  dtype=_torch.float32, device="cpu", *, xtol: float | None = None,
-                 adjoint_tol: float | None = None,
-                 adjoint_max_iter: int = 1000) -> None:
+                 adjoint_tol: float | None = None, adjoint_max_iter: int = 1000,
+                 dim: int | None = None) -> None:
         super().__init__()
         check_dtype(dtype)
         _check_layer_energy(energy)
-        problem = ARAPProblem.from_mesh(mesh, handles, energy, weights, rings=rings)
+        from .mesh.planar import PlanarInput
+        from .methods.planar import solve_dim
+        from .methods.registry import method
+
+        shape = PlanarInput.of(mesh)
+        #: solved in the plane (turns about z only); ``given_dim``: the caller's columns
+        self.planar = solve_dim(shape, dim, method(energy).planar, energy) == 2
+        self.given_dim = shape.given_dim
+        self._z = shape.z
+        self.fit = planar_rotations if self.planar else fit_rotations
+        problem = ARAPProblem.from_mesh(shape.mesh, handles, energy, weights, rings=rings)
         self.problem = problem
         self.system = TorchSystem(problem, device, dtype).bind(problem)
         self.tol = tolerance(tol)
@@ -257,11 +298,18 @@ class ARAPLayer(_torch.nn.Module):
 
     def forward(self, targets: _torch.Tensor) -> _torch.Tensor:
         """Deformed vertices ``(n, 3)`` or ``(B, n, 3)`` for targets ``(h, 3)`` or ``(B, h, 3)``."""
-        T, batched = _check_targets(targets, self.system, self.handles)
+        T, batched = _check_targets(targets, self.system, self.handles, self.given_dim)
+        if self.given_dim == 2:  # onto the plane z = 0 the problem was built on
+            T = _torch.cat([T, T.new_zeros(T.shape[:-1] + (1,))], dim=-1)
+        elif self.planar and bool((T[..., 2] != self._z).any()):
+            raise InputError(f"targets: a planar layer keeps z = {self._z:g} (the plane); "
+                             "use dim=3 to deform the shape out of its plane")
         # the problem lives in units of problem.scale (a power of two: exact); autograd sees
         # the two scalings as ordinary operations
         s = self.problem.scale
         X = _ARAPSolve.apply(T / s, self) * s
+        if self.given_dim == 2:
+            X = X[..., :2]
         return X if batched else X[0]
 
     def _iterate(self, T: _torch.Tensor) -> tuple[_torch.Tensor, dict]:
@@ -285,7 +333,7 @@ class ARAPLayer(_torch.nn.Module):
             x, x_prev = ts.solve(rhs), x
             P = ts.assemble(x, C)
             S = ts.covariances(P)
-            R = best_rotations(S)
+            R = best_rotations(S) if not self.planar else planar_rotations(S)
             E = ts.energy_expanded(P, R, S)
             passed = self._passed(E, E_prev, x - x_prev, it, floor)
             done = passed | (it == self.max_iter)

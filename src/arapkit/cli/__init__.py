@@ -40,6 +40,7 @@ COMMANDS: list[tuple[str, str]] = [
     ("edit", "arapkit.cli.edit"),
     ("batch", "arapkit.cli.batch"),
     ("simulate", "arapkit.cli.simulate"),
+    ("warp", "arapkit.cli.warp"),
 ]
 
 _EPILOG = """examples (from a clone of the repository, which ships examples/):

@@ -46,9 +46,11 @@ from ..arap.loop import Result, local_global, start_energy, with_progress
 from ..arap.problem import ARAPProblem
 from ..arap.rings import Neighbourhoods, check_rings
 from ..errors import Advice, InputError
-from ..mesh.model import Mesh, as_mesh
+from ..mesh.model import Mesh
+from ..mesh.planar import PlanarInput
 from ..mesh.weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
 from ..validate import integer, iteration_cap, real_array, tolerance
+from .planar import PlanarSolver, in_plane, planar_start, planar_targets, rings_or_preset, solve_dim
 from .registry import INTERFACES, MethodInfo, MethodOption, method, method_names, methods, register
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
@@ -67,8 +69,9 @@ def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
     that holds for descent methods alone.
     """
     en = energy_info(name)
+    # every energy of the loop is a neighbourhood energy, which the planar backend runs
     facts = {"descent": en.descent, "rigidity_map": en.rigidity_map,
-             "accelerate": en.descent, "multires": en.descent}
+             "accelerate": en.descent, "multires": en.descent, "planar": True}
     return MethodInfo(name, label, local_global=True, **(facts | kw))
 
 
@@ -200,13 +203,15 @@ class Deformer:
     Parameters
     ----------
     mesh : Mesh, a (vertices, faces) pair, or a trimesh.Trimesh
-        The surface (:func:`arapkit.mesh.model.as_mesh`).
+        The surface (:func:`arapkit.mesh.model.as_mesh`); a pair may hold ``(n, 2)``
+        positions (a planar shape, solved in 2D).
     handles : (h,) int, (n,) bool, or a HandleSet
         Vertices with positional constraints (a mask selects its True vertices; a
         :func:`arapkit.load_handles` set stands for its indices).
-    rings : int or (n,) int
+    rings : int, (n,) int or a preset name
         Neighbourhood size r per vertex (1 = standard ARAP; larger = stiffer). Only for
-        ``energy="rring"``.
+        ``energy="rring"``. A rigidity preset ("distort", "normal", "rigid") stands for its
+        r (:data:`arapkit.methods.planar.PRESETS`).
     weights : {"cotan", "cotan-clamped", "cotan-clamped-each", "uniform"}
         Edge weights (see :mod:`arapkit.mesh.weights`).
     energy : {"rring", "spokes-and-rims", "sr-arap", "smooth-arap", "embedded"}
@@ -259,6 +264,11 @@ class Deformer:
     reorder : bool
         Work internally in a bandwidth-reducing vertex order (results are returned in the
         mesh's order and agree with ``reorder=False`` to round-off).
+    dim : {None, 2, 3}
+        None: 2 for a planar shape with a method that runs in the plane, else 3
+        (:func:`arapkit.methods.planar.solve_dim`, ``docs/2d.md``).
+    flips : {"prevent", "allow"}
+        2D: keep every triangle unfolded (:mod:`arapkit.arap.flips`), or plain ARAP.
     device : {"cpu", "auto", "cuda", "cuda:N", "torch-cpu"}
         Where to solve: "cpu" runs the numba kernels; "cuda" (and "torch-cpu", the same
         code on CPU tensors) the torch backend of :mod:`arapkit.arap.backends.torch_backend` (extra
@@ -304,11 +314,13 @@ class Deformer:
                 volumetric: bool = False, density: float | None = None,
                 multires: bool | None = None, proxy_vertices: int | None = None,
                 levels=None, **options):
-        mesh = as_mesh(mesh)
+        shape = PlanarInput.of(mesh)
+        mesh = shape.mesh
         if not volumetric:
             if density is not None:
                 raise InputError("density is an option of volumetric=True")
-            if coarse_to_fine(mesh, multires, options):
+            if not in_plane(shape, multires, options) and coarse_to_fine(mesh, multires,
+                                                                         options):
                 if proxy_vertices is not None:
                     options["proxy_vertices"] = proxy_vertices
                 if levels is not None:
@@ -319,7 +331,7 @@ class Deformer:
                     raise InputError(f"{name} is an option of multires=True")
             obj = super().__new__(cls)
             # __init__ receives the caller's mesh again: a trimesh is converted once, here
-            obj._checked_mesh = mesh
+            obj._checked_shape = shape
             return obj
         if multires:
             raise InputError("multires=True is for surfaces; volumetric=True solves the "
@@ -360,17 +372,25 @@ class Deformer:
         history: int = 5,
         reorder: bool = True,
         device: str = "cpu",
+        dim: int | None = None,
+        flips: str = "prevent",
     ) -> None:
         self.device = check_device(device)
         options = check_method(energy, sr_alpha, nodes, sr_roi, smooth_lambda)
         info = method(energy)
+        rings = rings_or_preset(rings)
         self.ring_scale = check_ring_scale(ring_scale)
         if self.ring_scale != 1.0:
             if not info.rigidity_map:
                 raise InputError(f"ring_scale: energy '{energy}' has no rigidity map")
             options["ring_scale"] = self.ring_scale
-        mesh = self.__dict__.pop("_checked_mesh", None) or as_mesh(mesh)
+        shape = self.__dict__.pop("_checked_shape", None) or PlanarInput.of(mesh)
+        mesh = shape.mesh
         self.mesh = mesh
+        #: the shape as given (2D or 3D) and the dimension it is solved in
+        self.shape = shape
+        self.dim = solve_dim(shape, dim, info.planar, energy)
+        self._plane = PlanarSolver(shape, flips, self.device)
         self.energy = energy
         self.weights_kind = weights
         self.tol = tolerance(tol)
@@ -398,7 +418,7 @@ class Deformer:
             return
         self.problem = ARAPProblem.from_mesh(
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
-            reorder=reorder, **options)
+            reorder=reorder, dim=self.dim, **options)
         self._rings = self.problem.energy.rings[self.problem.iperm]
         if sr_roi is not None:
             _check_outside_roi_is_held(mesh, sr_roi, handles)
@@ -406,16 +426,20 @@ class Deformer:
         self._weight_notes = self._check_rest_is_minimum()
 
     # -- configuration (lazy refactorisation, as CGAL) -----------------------------
-    def set_handles(self, handles) -> None:
-        """Use a new handle set; the factorisation is redone at the next solve."""
+    def set_handles(self, handles, *, update_factor: bool | None = None) -> None:
+        """Use a new handle set; the factorisation is redone at the next solve, or, with
+        ``update_factor`` (None: in 2D), corrected (:mod:`arapkit.arap.pinupdate`)."""
         self._laplacian_editor = None
         if self.embedded is not None:
             from .embedded import EmbeddedDeformation
 
             self.embedded = EmbeddedDeformation(self.mesh, handles, len(self.embedded.nodes))
             return
-        new = self.problem.with_handles(handles)  # checked first: a bad set keeps the factor
-        self.problem.release_factor()  # not held beside the new one by whoever keeps this
+        update = self.dim == 2 if update_factor is None else bool(update_factor)
+        # checked first: a bad set keeps the factor
+        new = self.problem.with_handles(handles, update_factor=update)
+        if not new.factorised:
+            self.problem.release_factor()  # not held beside the new one by whoever keeps this
         self.problem = new
 
     def set_rings(self, rings) -> None:
@@ -425,7 +449,7 @@ class Deformer:
             if not np.all(np.asarray(rings) == 1):
                 raise InputError(f"energy '{self.energy}' has no rigidity map (rings must be 1)")
             return
-        r = check_rings(rings, p.n_vertices)  # a bad map is refused with the factor kept
+        r = check_rings(rings_or_preset(rings), p.n_vertices)  # a bad map: the factor is kept
         p.release_factor()  # of no use to the new map, and as large as the one to come
         self.problem = p.with_rings(r)
         self.backend = make_backend(self.problem, self.device)
@@ -443,12 +467,13 @@ class Deformer:
         """
         if self.energy_is_sum_of_squares:
             return []
-        R = np.empty((self.problem.energy.n_owners, 3, 3))
-        R_prev = np.tile(np.eye(3), (len(R), 1, 1))
-        E_rest = self.backend.local(self.problem.vertices.copy(), R, R_prev)
+        d = self.problem.dim
+        R = np.empty((self.problem.energy.n_owners, d, d))
+        R_prev = np.tile(np.eye(d), (len(R), 1, 1))
+        E_rest = self.backend.local(self.problem.rest_positions.copy(), R, R_prev)
         if E_rest >= -1e-9 * abs(self.backend.rest_term):
             return []
-        bad = int(np.count_nonzero(np.abs(R - np.eye(3)).max(axis=(1, 2)) > 1e-6))
+        bad = int(np.count_nonzero(np.abs(R - np.eye(d)).max(axis=(1, 2)) > 1e-6))
         return [Advice(
             f"{int((self.w < 0).sum())} edges have negative cotangent weights and the rest "
             f"shape is not an energy minimum ({bad} neighbourhoods prefer a rotation at rest): "
@@ -548,7 +573,8 @@ class Deformer:
         0.0
         """
         p = self._local_global("vertex_energy")
-        Pi = np.ascontiguousarray(np.asarray(P, dtype=np.float64)[p.perm] / p.scale)
+        P = np.asarray(P, dtype=np.float64)[:, :p.dim]
+        Pi = np.ascontiguousarray(P[p.perm] / p.scale)
         Ri = np.ascontiguousarray(np.asarray(R, dtype=np.float64)[p.perm])
         return self.backend.vertex_energy(Pi, Ri)[p.iperm] * (p.scale * p.scale)
 
@@ -570,11 +596,14 @@ class Deformer:
         True
         """
         p = self._local_global("energy_of")
-        T = check_targets(self.handles, targets)
+        d = p.dim
+        T = check_targets(self.handles, targets) if d == 3 else \
+            planar_targets(self.shape, self.handles, targets)[:, :2]
+        P = planar_start(self.shape, np.asarray(P, dtype=np.float64)) if d == 2 else P
         self.prepare()
         s = p.scale
-        R = np.empty((p.energy.n_owners, 3, 3))
-        R_prev = np.empty_like(R) if p.energy.coupling is not None else np.empty((0, 3, 3))
+        R = np.empty((p.energy.n_owners, d, d))
+        R_prev = np.empty_like(R) if p.energy.coupling is not None else np.empty((0, d, d))
         _, E = start_energy(p, self.backend, P, s, p.constrained_targets(T / s), R, R_prev)
         return float(E * s * s)
 
@@ -584,6 +613,8 @@ class Deformer:
             # 1.75M vertices, and a coarse-to-fine caller holds its own through the solve)
             P = (init if isinstance(init, np.ndarray) and init.dtype == np.float64
                  else real_array(init, "init"))
+            if targets.shape[1] == 2:  # a planar solve
+                return planar_start(self.shape, P)
             if P.shape != self.mesh.vertices.shape or not np.isfinite(P).all():
                 raise InputError(
                     f"init: expected finite positions of shape {self.mesh.vertices.shape}"
@@ -601,6 +632,10 @@ class Deformer:
 
             self._laplacian_editor = LaplacianEditor(
                 self.mesh, self.handles if p is None else p.constrained, "uniform")
+        if p is not None and targets.shape[1] == 2:  # in the plane: lifted and back
+            C = p.constrained_targets(targets)
+            C = np.concatenate([C, np.full((len(C), 1), self.shape.z)], axis=1)
+            return self._laplacian_editor.solve(C)[:, :2]
         return self._laplacian_editor.solve(targets if p is None else
                                             p.constrained_targets(targets))
 
@@ -614,15 +649,16 @@ class Deformer:
         callback: Callable[[int, float, np.ndarray], bool | None] | None = None,
         accelerate: bool | None = None,
         progress: Callable[[int, float], bool | None] | None = None,
+        angles=None,
     ) -> Result:
         """Deform so that the handles reach ``targets``.
 
         Parameters
         ----------
-        targets : (h, 3), or a HandleSet
+        targets : (h, 3), (h, 2) in 2D, or a HandleSet
             Positions of the handles, in the order of ``handles`` (a
             :func:`arapkit.load_handles` set stands for its targets).
-        init : None, "identity", "laplacian" or (n, 3) array
+        init : None, "identity", "laplacian" or (n, 3) array ((n, 2) in 2D)
             Starting point; an array is a warm start (e.g. the previous result).
         tol, max_iter : optional overrides of the constructor's values.
         callback : callable(iteration, energy, vertices) -> bool, optional
@@ -634,6 +670,10 @@ class Deformer:
             Called after every iteration (after ``callback``) without the shape: for a
             caller that reports progress or may interrupt the solve on a large mesh.
             Returning True stops the loop.
+        angles : (h,) float, optional
+            2D only: a turn per handle in radians (NaN: none), Photoshop's pin rotation.
+            A turned pin holds its own rotation and its one-ring neighbours' at the
+            angle, so its neighbourhood turns with it (:func:`pin_neighbourhoods`).
 
         Returns
         -------
@@ -652,7 +692,8 @@ class Deformer:
         >>> res.iterations, len(seen), seen[-1] == res.energy
         (3, 3, True)
         """
-        T = check_targets(self.handles, targets)
+        T = (check_targets(self.handles, targets) if self.dim == 3
+             else planar_targets(self.shape, self.handles, targets))
         tol = self.tol if tol is None else tolerance(tol)
         max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
         accelerate = bool(self.accelerate) if accelerate is None else bool(accelerate)
@@ -665,6 +706,11 @@ class Deformer:
                                        callback=with_progress(callback, progress))
         self.prepare()
         start = self._initial_positions(T, init)
-        return local_global(self.problem, self.backend, T, start, tol=tol, max_iter=max_iter,
-                            callback=callback, accelerate=accelerate, history=self.history,
-                            progress=progress)
+        loop = dict(tol=tol, max_iter=max_iter, callback=callback, accelerate=accelerate,
+                    history=self.history, progress=progress)
+        if self.dim == 2:
+            return self._plane.solve(self.problem, self.backend, self.handles, T, start,
+                                     angles, **loop)
+        if angles is not None:
+            raise InputError("angles: pin turns are for planar (2D) solves")
+        return local_global(self.problem, self.backend, T, start, **loop)

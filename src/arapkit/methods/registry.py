@@ -81,6 +81,9 @@ class MethodInfo:
     multires : bool
         Can be solved coarse to fine on a decimated proxy (``multires=True``,
         :mod:`arapkit.methods.multires`): a local/global descent method.
+    planar : bool
+        Runs in the plane on a planar shape (2 x 2 rotations, no folded triangles:
+        :mod:`arapkit.methods.planar`); a method without it solves planar shapes in 3D.
     handle_tol : float
         How far a handle may end from its target, relative to the bounding-box diagonal:
         0 for hard constraints (eliminated, met to round-off), the soft constraints'
@@ -102,6 +105,7 @@ class MethodInfo:
     accelerate: bool = False
     volumetric: bool = False
     multires: bool = False
+    planar: bool = False
     handle_tol: float = 0.0
     options: dict[str, MethodOption] = field(default_factory=dict, hash=False)
     interfaces: frozenset[str] = field(default_factory=lambda: frozenset(INTERFACES))

@@ -252,6 +252,8 @@ class CPUBackend:
     """
 
     name = "cpu"
+    #: the positions' columns (the planar backend's are 2)
+    dim = 3
 
     def __init__(self, problem: ARAPProblem) -> None:
         self.problem = problem
