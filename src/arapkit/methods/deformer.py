@@ -31,16 +31,12 @@ Constraints and the Cholesky factor are in :mod:`arapkit.arap.constraints`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
 from ..arap.backends import DEVICES, check_device, make_backend  # noqa: F401 - DEVICES: what device= takes
 from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
-from ..arap.energies import energy_info
 from ..arap.energies.rring import check_ring_scale
-from ..arap.energies.smooth_arap import DEFAULT_LAMBDA, check_smooth_lambda
-from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
 from ..arap.graph import bandwidth_order, unit_scale
 from ..arap.loop import Result, local_global, start_energy, with_progress
 from ..arap.problem import ARAPProblem
@@ -50,132 +46,22 @@ from ..mesh.model import Mesh
 from ..mesh.planar import PlanarInput
 from ..mesh.weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
 from ..validate import integer, iteration_cap, real_array, tolerance
+from .dispatch import (
+    INITS,
+    MULTIRES_AUTO_VERTICES,
+    check_method,
+    coarse_to_fine,
+    refuse_acceleration,
+    register_variant,
+    variant,
+)
 from .planar import PlanarSolver, in_plane, planar_start, planar_targets, rings_or_preset, solve_dim
-from .registry import INTERFACES, MethodInfo, MethodOption, method, method_names, methods, register
+from .registry import method
 
-__all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
-           "bandwidth_order", "check_method", "coarse_to_fine", "register_variant", "unit_scale"]
-
-INITS = ("identity", "laplacian")
-#: ``multires=None`` (the default) solves coarse to fine from this many vertices: below it
-#: a plain solve is already interactive, above it hundreds of full iterations are not
-MULTIRES_AUTO_VERTICES = 100_000
-
-
-def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
-    """A method of the local/global loop: what its energy's form fixes comes from the energy.
-
-    Anderson acceleration keeps an extrapolation only when it lowers the energy, a safeguard
-    that holds for descent methods alone.
-    """
-    en = energy_info(name)
-    # every energy of the loop is a neighbourhood energy, which the planar backend runs
-    facts = {"descent": en.descent, "rigidity_map": en.rigidity_map,
-             "accelerate": en.descent, "multires": en.descent, "planar": True}
-    return MethodInfo(name, label, local_global=True, **(facts | kw))
-
-
-register(_local_global_method("rring", "r-ring ARAP", volumetric=True))
-# compare runs the paper's comparison set, which has no spokes-and-rims
-register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP",
-                              interfaces=frozenset(INTERFACES) - {"compare"}))
-register(_local_global_method(
-    "sr-arap", "SR-ARAP",
-    # sr_roi's vertex ids are checked where the mesh is known (make_energy)
-    options={"sr_alpha": MethodOption("alpha", DEFAULT_ALPHA, check_alpha, "alpha = {:g}"),
-             "sr_roi": MethodOption("roi", None, lambda roi: roi)},
-    interfaces=frozenset(INTERFACES) - {"torch"},
-    why_not={"torch": "its rotation coupling has no per-step fixed point"}))
-register(_local_global_method(
-    "smooth-arap", "Smooth ARAP",
-    options={"smooth_lambda": MethodOption("smooth_lambda", DEFAULT_LAMBDA,
-                                           check_smooth_lambda, "lambda = {:g}")},
-    # coarse to fine counts r on the proxy with a ring scale, which this energy lacks,
-    # and the tetrahedra have no Laplacian term (it needs the surface's triangles)
-    multires=False))
-
-
-def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None,
-                 smooth_lambda=None) -> dict:
-    """Validate a method name and its options; return the method's options.
-
-    Examples
-    --------
-    >>> check_method("sr-arap", "0.1")
-    {'alpha': 0.1}
-    >>> check_method("smooth-arap")
-    {'smooth_lambda': 0.99}
-    """
-    names = method_names("library")
-    if energy not in names:
-        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(names)})")
-    info = method(energy)
-    given = {"sr_alpha": sr_alpha, "nodes": nodes, "sr_roi": sr_roi,
-             "smooth_lambda": smooth_lambda}
-    for name, value in given.items():
-        if value is not None and name not in info.options:
-            owner = next(m.name for m in methods("library") if name in m.options)
-            raise InputError(f"{name} is an option of energy '{owner}', not '{energy}'")
-    options = {opt.key: opt.check(opt.default if given.get(name) is None else given[name])
-               for name, opt in info.options.items()}
-    # an option without a default is left out unless given
-    return {key: value for key, value in options.items() if value is not None}
-
-
-def _refuse_acceleration(info: MethodInfo, remedy: str = "") -> None:
-    if not info.accelerate:
-        raise InputError(f"accelerate: Anderson acceleration is for the local/global "
-                         f"descent methods; energy '{info.name}' is not one{remedy}")
-
-
-#: the classes ``Deformer(..., <name>=True)`` returns instead (``volumetric``, ``multires``),
-#: registered by their own modules (:mod:`arapkit.methods.volumetric` and
-#: :mod:`arapkit.methods.multires` register themselves)
-_VARIANTS: dict[str, type] = {}
-
-
-def register_variant(flag: str, cls: type) -> type:
-    """Make ``Deformer(..., <flag>=True)`` return ``cls(mesh, handles, rings, **options)``.
-
-    ``cls`` takes the Deformer's keyword options, less the method's (``energy``,
-    ``sr_alpha``, ``sr_roi``, ``nodes``, ``smooth_lambda``), which :class:`Deformer`
-    checks first.
-
-    Examples
-    --------
-    >>> from arapkit.methods.volumetric import VolumetricDeformer
-    >>> register_variant("volumetric", VolumetricDeformer) is VolumetricDeformer
-    True
-    """
-    _VARIANTS[flag] = cls
-    return cls
-
-
-def coarse_to_fine(mesh: Mesh, multires: bool | None, options: dict) -> bool:
-    """Whether ``Deformer(..., multires=...)`` solves coarse to fine.
-
-    ``None`` (the default) means: for a method that can, on a mesh of at least
-    :data:`MULTIRES_AUTO_VERTICES` vertices, unless the caller asked for a start of its own
-    (``init``) or a partial SR-ARAP region.
-
-    Examples
-    --------
-    >>> from arapkit.mesh.shapes import bar
-    >>> coarse_to_fine(bar(), None, {}), coarse_to_fine(bar(), True, {})
-    (False, True)
-    """
-    energy = options.get("energy", "rring")
-    if energy not in method_names("library"):
-        return False  # Deformer itself says which names there are
-    info = method(energy)
-    if multires is None:
-        return (info.multires and mesh.n_vertices >= MULTIRES_AUTO_VERTICES
-                and options.get("init", "identity") == "identity"
-                and options.get("sr_roi") is None)
-    if multires and not info.multires:
-        raise InputError(f"multires=True: energy '{info.name}' cannot be solved coarse to "
-                         "fine (a local/global descent method can)")
-    return bool(multires)
+# the method choice moved to .dispatch; its names stay importable from here
+__all__ = ["INITS", "MULTIRES_AUTO_VERTICES", "Deformer", "Result", "check_handles",
+           "anchor_components", "CholeskyFactor", "bandwidth_order", "check_method",
+           "coarse_to_fine", "register_variant", "unit_scale"]
 
 
 def _rows(ptr: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -325,7 +211,7 @@ class Deformer:
                     options["proxy_vertices"] = proxy_vertices
                 if levels is not None:
                     options["levels"] = levels
-                return _VARIANTS["multires"](mesh, handles, rings, weights, **options)
+                return variant("multires")(mesh, handles, rings, weights, **options)
             for name, value in (("proxy_vertices", proxy_vertices), ("levels", levels)):
                 if value is not None:
                     raise InputError(f"{name} is an option of multires=True")
@@ -344,7 +230,7 @@ class Deformer:
                              "surfaces")
         if density is not None:
             options["density"] = density
-        return _VARIANTS["volumetric"](mesh, handles, rings, **options)
+        return variant("volumetric")(mesh, handles, rings, **options)
 
     def __init__(
         self,
@@ -401,7 +287,7 @@ class Deformer:
         # None: the method's choice, which for a plain solve is off
         self.accelerate = None if accelerate is None else bool(accelerate)
         if self.accelerate:
-            _refuse_acceleration(info, " (use accelerate=False)")
+            refuse_acceleration(info, " (use accelerate=False)")
         self.history = integer(history, "history", lo=1, hi=1000)
         self.factorisations = 0
         self._laplacian_editor = None
@@ -698,7 +584,7 @@ class Deformer:
         max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
         accelerate = bool(self.accelerate) if accelerate is None else bool(accelerate)
         if accelerate:
-            _refuse_acceleration(method(self.energy))
+            refuse_acceleration(method(self.energy))
         if self.embedded is not None:
             # a start shape becomes node maps fitted to it (EmbeddedDeformation.fit_node_maps)
             return self.embedded.solve(T, init=self._initial_positions(T, init), tol=tol,

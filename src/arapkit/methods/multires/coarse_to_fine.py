@@ -32,7 +32,8 @@ from ...errors import InputError
 from ...mesh.model import Mesh
 from ...mesh.weights import DEFAULT_WEIGHTS
 from ...validate import ring_sizes
-from ..deformer import MULTIRES_AUTO_VERTICES, Deformer, register_variant
+from ..deformer import Deformer
+from ..dispatch import MULTIRES_AUTO_VERTICES, register_variant
 from ..registry import method
 from .binding import Binding, full_tree_of, proxy_rings
 from .decimator import DEFAULT_PROXY_VERTICES, decimation, specks
