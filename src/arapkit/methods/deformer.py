@@ -43,6 +43,7 @@ from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
 from ..arap.graph import bandwidth_order, unit_scale
 from ..arap.loop import Result, local_global, start_energy, with_progress
 from ..arap.problem import ARAPProblem
+from ..arap.ringcost import check_ring_memory
 from ..arap.rings import Neighbourhoods, check_rings
 from ..errors import Advice, InputError
 from ..mesh.model import Mesh, as_mesh
@@ -295,6 +296,11 @@ class Deformer:
                     options["proxy_vertices"] = proxy_vertices
                 if levels is not None:
                     options["levels"] = levels
+                if method(options.get("energy", "rring")).rigidity_map:
+                    # the full mesh's rings are built at the exact solve, in the background:
+                    # a map that would not fit is refused here, before anything starts
+                    check_ring_memory(mesh.n_vertices, mesh.edges,
+                                      check_rings(rings, mesh.n_vertices), mesh.name)
                 return _VARIANTS["multires"](mesh, handles, rings, weights, **options)
             for name, value in (("proxy_vertices", proxy_vertices), ("levels", levels)):
                 if value is not None:
