@@ -183,7 +183,7 @@ def test_browser_controls_name_the_handle_they_act_on(tmp_path):
             page.get_by_role("button", name=f"Reset pose of {newest}").wait_for(timeout=5_000)
             # a failed "Make handle" leaves an error line ...
             _click_button(page, "Make handle from selection")
-            page.get_by_text("no vertices selected").first.wait_for(timeout=15_000)
+            page.get_by_text("nothing is selected").first.wait_for(timeout=15_000)
             assert app.md_status.content.startswith("⚠")
             # ... which the next action that works clears; the controls still name the handle
             _click_button(page, "Clear selection")

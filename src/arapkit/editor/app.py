@@ -63,9 +63,9 @@ __all__ = ["MAX_R", "MESH_SUFFIXES", "TOOLS", "UP_AXES", "VIEWS", "EditorApp", "
 FRAME_FILL = 0.7
 #: a gizmo's size in radii of its handle (see EditorApp.gizmo_scale)
 GIZMO_PER_RADIUS = 6.0
-#: a gizmo's size within these fractions of the mesh's bounding-box diagonal: at 0.3 an
-#: arrow from a handle at the model's edge reached under the panel or out of the view
-GIZMO_MIN, GIZMO_MAX = 0.05, 0.16
+#: a gizmo's size within these fractions of the mesh's bounding-box diagonal (the model
+#: is framed left of the panel, so that these reach no further than the view's edge)
+GIZMO_MIN, GIZMO_MAX = 0.08, 0.3
 #: the share of the page's width that the panel covers (320 px of a 1200 px window): the
 #: camera aims so that the model is centred in the rest
 PANEL_SHARE = 0.28
