@@ -151,6 +151,13 @@ def test_a_slider_gesture_is_one_rebuild_and_one_undo_step(tmp_path):
         time.sleep(panels.SLIDER_REST_S + 0.5)
         assert app.wait_idle(120)
         assert np.all(st.rings == 17) and builds == [17]
+        # a gesture that paused (or whose values came late) is applied in two pieces, and
+        # is still one undo step
+        slide(app, range(18, 24))
+        time.sleep(panels.SLIDER_REST_S + 0.5)
+        slide(app, range(24, 30))
+        time.sleep(panels.SLIDER_REST_S + 0.5)
+        assert app.wait_idle(120) and np.all(st.rings == 29)
         assert st.undo() and np.all(st.rings == 1) and not st.can_undo
     finally:
         app.stop()

@@ -68,11 +68,12 @@ SAMPLES = 512
 MIN_GROUP_SAMPLES = 32
 #: environment variable that replaces the memory available to a ring build (MiB)
 RING_MEMORY_VARIABLE = "ARAPKIT_RING_MEMORY_MB"
-#: seconds per edge entry and per disk entry of the build on one thread, measured with
-#: ``benchmarks/bench_ring_build.py`` (see ``docs/benchmarks.md``); the build runs on every
-#: thread numba has
-SECONDS_PER_EDGE_ENTRY = 1.0e-8
-SECONDS_PER_DISK_ENTRY = 2.0e-8
+#: seconds per edge entry and per disk entry of the build on one thread of an idle machine
+#: (13,750 vertices, r = 10 ... 50: 54-105 ns per edge plus two disk entries, see
+#: ``docs/benchmarks.md``); the build runs on every thread numba has. A busy machine is
+#: slower in proportion to its load
+SECONDS_PER_EDGE_ENTRY = 8.0e-8
+SECONDS_PER_DISK_ENTRY = 1.6e-7
 
 
 @dataclass(frozen=True)

@@ -521,6 +521,8 @@ class EditorApp(Panels, PointerTools, FileActions):
             if len(idx) == 0:
                 self.status("No handles yet: see **Next** below.")
                 return None
+            if self._status_ok.startswith("No handles yet"):  # not once a handle is made
+                self.status(f"**{st.settings.label}** · solving ...")
             req = SolveRequest(st.mesh, idx, tgt, st.rings, dataclasses.replace(st.settings),
                                live=live)
             return self.worker.submit(req)

@@ -10,6 +10,7 @@ are skipped and bad input becomes a notification, never an exception in viser's 
 from __future__ import annotations
 
 import threading
+import time
 import traceback
 import types
 import zipfile
@@ -42,6 +43,10 @@ _ERROR_MARK = "⚠ "
 #: a Global r gesture is applied once the slider has rested this long (viser sends every
 #: value the slider passes, and nothing at the release): one rebuild and one undo step
 SLIDER_REST_S = 0.6
+#: a Global r applied within this many seconds of the last one, with nothing changed in
+#: between, joins its undo step: a gesture that paused (or whose values arrived late on a
+#: busy machine) is still undone in one click
+GESTURE_S = 3.0
 #: the dot colours of handles: movable orange, fixed grey, the active one (the one the
 #: Handles panel acts on) brighter: yellow when movable, light grey when fixed
 HANDLE_COLOURS = {(False, False): ((255, 140, 0), "orange"),
@@ -485,10 +490,18 @@ class Panels:
         self._global_rested()
 
     def _set_global(self, r: int) -> None:
-        if np.all(self.state.rings == r):
+        st = self.state
+        if np.all(st.rings == r):
             return
-        self.state.set_global_rings(int(r))
-        self.after_edit()
+        last = getattr(self, "_last_global", None)
+        joins = (last is not None and last[1] is st.rings
+                 and time.monotonic() - last[0] < GESTURE_S)
+        before = st.rings
+        st.set_global_rings(int(r), record=not joins)
+        self._last_global = (time.monotonic(), st.rings)
+        # a refusal takes back this piece only: the gesture's step keeps its start
+        self.after_edit(revert=(lambda: setattr(st, "rings", before) or True) if joins
+                        else None)
 
     def _cancel_build(self) -> None:
         """Stop a long r-ring build: the rigidity map goes back to the one being solved."""

@@ -348,10 +348,12 @@ class EditorState:
         return self.handle_indices(), np.concatenate([h.targets() for h in self.handles])
 
     # ---------------------------------------------------------------- rigidity
-    def set_global_rings(self, r: int) -> None:
-        """Give every vertex the same ``r``."""
+    def set_global_rings(self, r: int, record: bool = True) -> None:
+        """Give every vertex the same ``r`` (``record=False``: as part of the last undo
+        step, e.g. a slider gesture applied in two pieces)."""
         new = self.check_rings(validate.ring_size(r, "global r"))
-        self.checkpoint()
+        if record:
+            self.checkpoint()
         self.rings = new
 
     def restore_rings(self, rings: np.ndarray) -> None:
