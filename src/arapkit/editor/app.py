@@ -60,12 +60,14 @@ from arapkit.mesh.selection import connected_region
 __all__ = ["MAX_R", "MESH_SUFFIXES", "TOOLS", "UP_AXES", "VIEWS", "EditorApp", "safe_stem"]
 
 #: how much of the view the model fills when a mesh is opened
-FRAME_FILL = 0.7
+FRAME_FILL = 0.65
 #: a gizmo's size in radii of its handle (see EditorApp.gizmo_scale)
 GIZMO_PER_RADIUS = 6.0
-#: a gizmo's size within these fractions of the mesh's bounding-box diagonal (the model
-#: is framed left of the panel, so that these reach no further than the view's edge)
-GIZMO_MIN, GIZMO_MAX = 0.08, 0.3
+#: a gizmo's size within these fractions of the mesh's bounding-box diagonal: framed at
+#: FRAME_FILL left of the panel, a tall model (the cactus, seen from a little above) has
+#: about 0.13 of its diagonal to spare above its top, so an arrow from a handle there stays
+#: in view (at 0.3 it left the view, or reached under the panel)
+GIZMO_MIN, GIZMO_MAX = 0.05, 0.12
 #: the share of the page's width that the panel covers (320 px of a 1200 px window): the
 #: camera aims so that the model is centred in the rest
 PANEL_SHARE = 0.28
