@@ -19,6 +19,7 @@ import numpy as np
 
 from arapkit.cli.common import (
     Progress,
+    RingProgress,
     add_example_epilog,
     add_view_options,
     add_weld_option,
@@ -305,7 +306,8 @@ def run(args: argparse.Namespace) -> int:
 
         note(f"--weights {args.weights} applies to surface ARAP; the volume's edges use "
              f"'{DEFAULT_VOLUME_WEIGHTS}' weights (see docs/volumetric.md)", args.quiet)
-    prepared = prepare_job(job, note=tell)
+    with RingProgress(disable=args.quiet):  # a large r's build shows its progress
+        prepared = prepare_job(job, note=tell)
     mesh, hs = prepared.mesh, prepared.handles
     with Progress(disable=args.quiet) as progress:
         res = prepared.solve(callback=progress)

@@ -195,8 +195,9 @@ class FileActions:
             except Exception as exc:  # a parser choking on garbage: still the file's fault
                 raise InputError(f"{name}: cannot read ({type(exc).__name__}: {exc})") from None
 
-    def open_mesh_bytes(self, name: str, data: bytes) -> None:
-        """Replace the mesh by an uploaded file (``name`` only picks the format)."""
+    def read_mesh_bytes(self, name: str, data: bytes) -> Any:
+        """The mesh of an uploaded file (``name`` only picks the format), or a one-line
+        refusal; nothing in the editor changes."""
         from arapkit import load_mesh
 
         self._check_upload(name, data, "meshes")
@@ -204,9 +205,23 @@ class FileActions:
             raise InputError(f"{name}: not a mesh file (use {readable_formats(' or ')})")
         mesh = self._via_tempfile(name, data, load_mesh)
         mesh.name = safe_stem(name)
+        return mesh
+
+    def replace_mesh(self, mesh: Any) -> None:
+        """Start a new session on ``mesh`` (the old one's handles, r and undo are gone)."""
         with self.lock:
             self.state = EditorState(mesh)
             self.install_mesh()
+
+    def open_mesh_bytes(self, name: str, data: bytes) -> None:
+        """Replace the mesh by an uploaded file at once (the page asks first, see
+        :meth:`has_work`)."""
+        self.replace_mesh(self.read_mesh_bytes(name, data))
+
+    def has_work(self) -> bool:
+        """Whether opening another mesh would lose something: handles, or edits to undo."""
+        st = self.state
+        return bool(st.handles) or st.can_undo or bool((st.rings != 1).any())
 
     def load_rings_bytes(self, name: str, data: bytes) -> np.ndarray:
         """Use an uploaded rigidity map (text, .npy or PLY with ``rings``); undoable."""
@@ -237,8 +252,42 @@ class FileActions:
 
     def _upload_mesh(self, event: Any) -> None:
         f = self.up_mesh.value
-        self.open_mesh_bytes(f.name, f.content)
-        self.notify(event, "Mesh loaded", self.mesh_info().replace("**", ""))
+        mesh = self.read_mesh_bytes(f.name, f.content)  # a bad file changes nothing
+        client = getattr(event, "client", None)
+        if client is None or not self.has_work():
+            self.replace_mesh(mesh)
+            self.notify(event, "Mesh loaded", self.mesh_info().replace("**", ""))
+            return
+        self._confirm_open(event, client, f.name, mesh)
+
+    def _confirm_open(self, event: Any, client: Any, name: str, mesh: Any) -> None:
+        """Ask before a new mesh replaces this one's handles, r and deformation (no undo
+        crosses meshes, as in Blender or Photoshop opening a file)."""
+        st = self.state
+        what = [f"{len(st.handles)} handle(s)" if st.handles else "",
+                "its r" if (st.rings != 1).any() else "",
+                "its deformation and undo history" if st.can_undo else ""]
+        lost = ", ".join(w for w in what if w)
+        shown, current = printable(name), printable(st.mesh.name)
+        modal = client.gui.add_modal(f"Open {shown}?")
+        with modal:
+            client.gui.add_markdown(
+                f"This replaces **{current}** with {lost}. Undo cannot bring them back: "
+                "*Save session* first to keep them.")
+            b_open = client.gui.add_button(f"Open {shown}", color="red")
+            b_keep = client.gui.add_button(f"Keep {current}")
+
+        def open_it(_: Any) -> None:
+            modal.close()
+            self.replace_mesh(mesh)
+            self.notify(event, "Mesh loaded", self.mesh_info().replace("**", ""))
+
+        def keep(_: Any) -> None:
+            modal.close()
+            self.notify(event, "Not opened", f"{shown}: kept {current} as it was")
+
+        b_open.on_click(self.ui(open_it))
+        b_keep.on_click(self.ui(keep))
 
     def _upload_rings(self, event: Any) -> None:
         f = self.up_rings.value

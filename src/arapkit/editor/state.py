@@ -129,29 +129,40 @@ class EditorState:
         del self._undo[:-MAX_UNDO]
         self._redo.clear()
 
-    def undo(self) -> bool:
-        """Go back one step; ``False`` when there is nothing to undo."""
-        if not self._undo:
+    def _is_current(self, snap: _Snapshot) -> bool:
+        """``snap`` is what the state already is: going back to it would change nothing."""
+        return ((snap.rings is self.rings or np.array_equal(snap.rings, self.rings))
+                and len(snap.handles) == len(self.handles)
+                and all(a.same_as(b) for a, b in zip(snap.handles, self.handles,
+                                                      strict=True)))
+
+    def _step(self, source: list[_Snapshot], target: list[_Snapshot]) -> bool:
+        # steps that changed nothing (a gizmo grabbed and let go in place, a value set to
+        # what it was) are dropped: every Undo click changes what the user sees
+        while source and self._is_current(source[-1]):
+            source.pop()
+        if not source:
             return False
-        self._redo.append(self._snapshot())
-        self._restore(self._undo.pop())
+        target.append(self._snapshot())
+        self._restore(source.pop())
         return True
+
+    def undo(self) -> bool:
+        """Go back one step that changes something; ``False`` when there is none."""
+        return self._step(self._undo, self._redo)
 
     def redo(self) -> bool:
         """Re-apply the last undone step; ``False`` when there is nothing to redo."""
-        if not self._redo:
-            return False
-        self._undo.append(self._snapshot())
-        self._restore(self._redo.pop())
-        return True
+        return self._step(self._redo, self._undo)
 
     @property
     def can_undo(self) -> bool:
-        return bool(self._undo)
+        # from the top: the last step is nearly always a real one, so one comparison
+        return any(not self._is_current(s) for s in reversed(self._undo))
 
     @property
     def can_redo(self) -> bool:
-        return bool(self._redo)
+        return any(not self._is_current(s) for s in reversed(self._redo))
 
     # ---------------------------------------------------------------- selection
     def _combine(self, idx: np.ndarray, mode: str) -> np.ndarray:
@@ -263,6 +274,8 @@ class EditorState:
         new_name = new_name.strip()
         if not new_name:
             raise InputError("rename handle: the new name is empty")
+        if new_name == name:
+            return
         if new_name != name and any(h.name == new_name for h in self.handles):
             raise InputError(f"rename handle: the name {new_name!r} is taken")
         h = self.handle(name)
@@ -335,11 +348,17 @@ class EditorState:
         return self.handle_indices(), np.concatenate([h.targets() for h in self.handles])
 
     # ---------------------------------------------------------------- rigidity
-    def set_global_rings(self, r: int) -> None:
-        """Give every vertex the same ``r``."""
+    def set_global_rings(self, r: int, record: bool = True) -> None:
+        """Give every vertex the same ``r`` (``record=False``: as part of the last undo
+        step, e.g. a slider gesture applied in two pieces)."""
         new = self.check_rings(validate.ring_size(r, "global r"))
-        self.checkpoint()
+        if record:
+            self.checkpoint()
         self.rings = new
+
+    def restore_rings(self, rings: np.ndarray) -> None:
+        """Go back to the map ``rings`` (a cancelled build's), as an undoable step."""
+        self.load_rings(rings)
 
     def load_rings(self, rings: np.ndarray) -> None:
         """Replace the rigidity map (e.g. a learned rings file)."""

@@ -36,7 +36,7 @@ import numpy as np
 from arapkit.editor.geometry import CameraView, nearest_corner, raycast
 from arapkit.editor.state import EditorState
 from arapkit.editor.views import RING_COLORS, ring_labels
-from arapkit.errors import InputError
+from arapkit.errors import InputError, worded_for
 
 __all__ = ["TOOLS", "Pick", "PointerTools", "Tool", "find_tool"]
 
@@ -155,6 +155,10 @@ class PointerTools:
     md_tool_help: Any
     sl_radius: Any
     sl_paint: Any
+    dd_view: Any
+    quietly: Callable[[Callable[[], Any]], None]
+    rebuild_display: Callable[[], None]
+    show_settings: Callable[[], None]
     after_edit: Callable[..., int | None]
     draw_markers: Callable[[], None]
     mesh_nodes: Callable[[], list[Any]]
@@ -210,6 +214,14 @@ class PointerTools:
     def _on_tool_changed(self) -> None:
         t = self.tool
         self.md_tool_help.content = t.help
+        if t.paints and self.dd_view.value == "Shaded":
+            # paint is invisible on the shaded model: show the r colours while painting
+            # (as Blender's weight paint mode shows the weights)
+            self.quietly(lambda: setattr(self.dd_view, "value", "Rigidity r"))
+            self.rebuild_display()
+            self.show_settings()
+            self.md_tool_help.content = (t.help + " The view switched to *Rigidity r* to "
+                                         "show what you paint.")
         scene = self.server.scene
         scene.remove_rect_select_callback("all")
         if t.rectangle:
@@ -239,7 +251,8 @@ class PointerTools:
                 self.apply_tool(t.name, hit[1], face=hit[0], add=add)
                 self.clear_error()
         except InputError as exc:
-            self.notify(event, "Cannot do that", str(exc), error=True)
+            self.notify(event, "Cannot do that",
+                        worded_for(exc.args[0], "editor") if exc.args else str(exc), error=True)
 
     def _on_rect(self, event: Any) -> None:
         if not self.tool.rectangle:

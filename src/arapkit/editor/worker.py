@@ -58,6 +58,7 @@ from typing import Any
 
 import numpy as np
 
+from arapkit.arap.rings import BuildCancelled, ring_progress
 from arapkit.editor.motion import SecondaryMotion
 from arapkit.editor.settings import SolverSettings
 from arapkit.errors import worded_for
@@ -74,6 +75,10 @@ PREVIEW_FRAME_MS = 20.0
 #: seconds between the progress reports (iterations and energy, no shape) of a large mesh's
 #: exact solve after a release
 PROGRESS_EVERY_S = 1.0
+#: seconds between the progress reports of a long r-ring build, and the shortest build
+#: (estimated) that reports: the page shows a bar and a Cancel button
+BUILD_PROGRESS_EVERY_S = 0.25
+BUILD_PROGRESS_FROM_S = 1.0
 
 
 @dataclasses.dataclass
@@ -123,6 +128,9 @@ class SolveUpdate:
     #: dragging); None for a full-resolution shape
     proxy_mesh: Any = None
     proxy_vertices: np.ndarray | None = None
+    #: a long r-ring build in progress: (fraction done, estimated seconds, what it costs);
+    #: such an update has no shape and is not final
+    building: tuple[float, float, str] | None = None
 
 
 def _coarse_to_fine(mesh: Any, s: SolverSettings) -> bool:
@@ -375,9 +383,33 @@ class SolveWorker:
         self._emit(req, V, np.nan, 1, True, True, setup_ms=setup)
         self._record_latency(req)
 
+    def _build_progress(self, req: SolveRequest) -> Callable[[float, Any], bool]:
+        """The ring build's progress callback: reports a long build now and then, and
+        cancels it as soon as a newer request waits (a new r, an undo, Cancel)."""
+        last = [-1.0]
+
+        def report(fraction: float, cost: Any) -> bool:
+            if self.has_newer:
+                return True
+            now = time.perf_counter()
+            if cost.seconds >= BUILD_PROGRESS_FROM_S and (
+                    now - last[0] >= BUILD_PROGRESS_EVERY_S or fraction >= 1.0):
+                last[0] = now
+                self._emit(req, None, np.nan, 0, False, False,
+                           building=(fraction, cost.seconds, cost.describe()))
+            return False
+
+        return report
+
     def _solve_iterative(self, req: SolveRequest, t0: float) -> None:
         s = req.settings
-        d = self._engine.deformer_for(req)
+        try:
+            # a large r's rings take seconds to minutes: built here, off the page's
+            # thread, with progress, and given up for a newer request
+            with ring_progress(self._build_progress(req)):
+                d = self._engine.deformer_for(req)
+        except BuildCancelled:
+            return  # the newer request runs next, from the deformer as it was
         setup = (time.perf_counter() - t0) * 1e3
         if isinstance(d, MultiresDeformer):
             self._solve_coarse_to_fine(req, d, setup)

@@ -49,6 +49,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+from ..arap.ringcost import memory_share
 from ..errors import InputError
 
 # the job schema and augmentation live beside this module; their names stay importable here
@@ -216,7 +217,9 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
 
     t0 = time.perf_counter()
     worker = _worker_address()
+    sharing = 1  # jobs that run beside this one on its host share its memory
     if isinstance(threads, dict):
+        sharing = max(1, threads.get(_host(worker), 1))
         threads = _threads_for(threads)
     output = Path(outdir) / job["output"]
     try:
@@ -230,7 +233,7 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
         for f in spec.input_files():
             if Path(f).resolve() == output.resolve():
                 raise InputError(f"{output}: output would overwrite an input file")
-        with _limit_threads(threads) as threads:
+        with _limit_threads(threads) as threads, memory_share(sharing):
             prepared = prepare_job(spec)
             res = prepared.solve()
         output.parent.mkdir(parents=True, exist_ok=True)
