@@ -164,6 +164,11 @@ def test_coarse_to_fine_refuses_the_full_mesh_rings_up_front(small_limit):
     with pytest.raises(InputError, match=f"r = 20 on {m.n_vertices:,} vertices"):
         Deformer(m, h, rings=20, multires=True, proxy_vertices=400)
 
+    d = Deformer(m, h, rings=2, multires=True, proxy_vertices=400)
+    with pytest.raises(InputError, match=f"r = 20 on {m.n_vertices:,} vertices"):
+        d.set_rings(20)  # refused now, not when the full mesh is built for the next solve
+    assert d.rings.max() == 2 and d.proxy.rings.max() <= 2
+
 
 def test_a_limit_with_room_builds(monkeypatch):
     monkeypatch.setenv(RING_MEMORY_VARIABLE, "100000")

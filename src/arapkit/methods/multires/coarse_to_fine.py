@@ -158,7 +158,7 @@ class MultiresDeformer:
         self.energy = energy
         self.handles = check_handles(mesh, handles)
         self._rings = ring_sizes(rings, mesh.n_vertices)
-        self._check_ring_memory()
+        self._check_ring_memory(self._rings)
         self._weights = weights
         # acceleration is part of the machinery here: on unless asked off
         if options.get("accelerate") is None:
@@ -192,15 +192,14 @@ class MultiresDeformer:
         if background:
             self.prepare(background=True)
 
-    def _check_ring_memory(self) -> None:
+    def _check_ring_memory(self, rings: np.ndarray) -> None:
         """Refuse a rigidity map whose full-mesh rings would not fit in memory now: they
         are built at the exact solve, perhaps in the background, where a refusal would come
         late (:func:`arapkit.arap.ringcost.check_ring_memory`). One-rings are not
         estimated: they are the size of the mesh's own edges, and the estimate needs the
         edge list, which the open of a large mesh does not otherwise wait for."""
-        if method(self.energy).rigidity_map and int(self._rings.max()) > 1:
-            check_ring_memory(self.mesh.n_vertices, self.mesh.edges, self._rings,
-                              self.mesh.name)
+        if method(self.energy).rigidity_map and int(rings.max()) > 1:
+            check_ring_memory(self.mesh.n_vertices, self.mesh.edges, rings, self.mesh.name)
 
     # -- the proxy -------------------------------------------------------------------
     @property
@@ -339,8 +338,9 @@ class MultiresDeformer:
 
     def set_rings(self, rings) -> None:
         """Use a new rigidity map: the proxy's is rebuilt now, the full mesh's lazily."""
-        self._rings = ring_sizes(rings, self.mesh.n_vertices)
-        self._check_ring_memory()
+        rings = ring_sizes(rings, self.mesh.n_vertices)
+        self._check_ring_memory(rings)  # before anything changes: a refusal keeps the old map
+        self._rings = rings
         self._fine.pose(self.handles, self._rings, self._region)
         self.stage.set_rings(self._proxy_rings())
 
