@@ -183,6 +183,13 @@ class GroupedProblem(ARAPProblem):
         b = ARAPProblem.b_rest.func(self)
         return b if self.layout is None else self.part_system.rest_rhs(b)
 
+    def without_groups(self) -> ARAPProblem:
+        """The same problem without its groups (the energy unpooled, the factor not kept)."""
+        own = {f.name: getattr(self, f.name) for f in fields(ARAPProblem)}
+        own["energy"] = self.base_energy or self.energy
+        own["timings"] = {k: v for k, v in self.timings.items() if k != "factorisation_ms"}
+        return ARAPProblem(**own)
+
     def with_rings(self, rings) -> GroupedProblem:
         """As :meth:`ARAPProblem.with_rings`, the groups kept."""
         plain = replace(self, energy=self.base_energy or self.energy, base_energy=None)

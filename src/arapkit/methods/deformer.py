@@ -71,9 +71,9 @@ def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
                       multires=en.descent, **kw)
 
 
-register(_local_global_method("rring", "r-ring ARAP", volumetric=True))
+register(_local_global_method("rring", "r-ring ARAP", volumetric=True, groups=True))
 # compare runs the paper's comparison set, which has no spokes-and-rims
-register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP",
+register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP", groups=True,
                               interfaces=frozenset(INTERFACES) - {"compare"}))
 register(_local_global_method(
     "sr-arap", "SR-ARAP",
@@ -153,12 +153,16 @@ def coarse_to_fine(mesh: Mesh, multires: bool | None, options: dict) -> bool:
         return False  # Deformer itself says which names there are
     info = method(energy)
     if multires is None:
+        # vertex groups have no proxy yet: a mesh with them is solved at full resolution
         return (info.multires and mesh.n_vertices >= MULTIRES_AUTO_VERTICES
                 and options.get("init", "identity") == "identity"
-                and options.get("sr_roi") is None)
+                and options.get("sr_roi") is None and options.get("groups") is None)
     if multires and not info.multires:
         raise InputError(f"multires=True: energy '{info.name}' cannot be solved coarse to "
                          "fine (a local/global descent method can)")
+    if multires and options.get("groups") is not None:
+        raise InputError("multires=True: vertex groups are solved at full resolution only "
+                         "(use multires=False)")
     return bool(multires)
 
 
@@ -220,6 +224,15 @@ class Deformer:
         (``r s < 1``) it blends in a rotation per triangle
         (:mod:`arapkit.arap.energies.rring`). Coarse to fine sets it for its proxy.
         ``energy="rring"`` only; the CPU device only below 1.
+    groups : VertexGroups or (n,) int, optional
+        Vertex groups (:class:`arapkit.mesh.groups.VertexGroups`, e.g. from
+        :func:`arapkit.io.load_groups`): **rigid parts**, whose vertices move by one rigid
+        motion (solved exactly: a handle inside one moves the whole part), and
+        **shared-rotation groups**, libigl's ``ARAPData.G`` (one rotation, free positions).
+        A plain array is libigl's ``G``: one id per vertex, shared rotations, -1 for none.
+        For the methods the registry says take them (``MethodInfo.groups``: r-ring and
+        spokes-and-rims ARAP); they mix with a rigidity map and with handles. See
+        ``docs/groups.md``.
     tol : float
         Stop when ``|E_{t-1} - E_t| / |E_{t-1}| < tol`` (the paper's test, gamma = 1e-3).
     max_iter : int
@@ -280,6 +293,17 @@ class Deformer:
     >>> fast = Deformer(mesh, h, rings=2, accelerate=True).solve(t, tol=1e-6)
     >>> bool(fast.energy <= res.energy)
     True
+
+    A rigid part in the middle of the bar keeps its shape while the rest bends:
+
+    >>> from arapkit.mesh.groups import VertexGroups
+    >>> middle = np.flatnonzero(np.abs(mesh.vertices[:, 0] - 4) < 1)
+    >>> part = VertexGroups.from_lists([("middle", middle, True)], mesh.n_vertices)
+    >>> bent = Deformer(mesh, h, groups=part).solve(t).vertices
+    >>> i, j = middle[0], middle[-1]
+    >>> d0, d1 = (np.linalg.norm(X[i] - X[j]) for X in (mesh.vertices, bent))
+    >>> bool(abs(d1 - d0) < 1e-9 * d0)
+    True
     """
 
     def __new__(cls, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
@@ -306,6 +330,9 @@ class Deformer:
         if multires:
             raise InputError("multires=True is for surfaces; volumetric=True solves the "
                              "volume directly")
+        if options.get("groups") is not None:
+            raise InputError("groups: vertex groups are for surface ARAP, not "
+                             "volumetric=True (the volume's interior vertices have none)")
         energy = options.pop("energy", "rring")
         check_method(energy, options.pop("sr_alpha", None), options.pop("nodes", None),
                      options.pop("sr_roi", None))
@@ -333,6 +360,7 @@ class Deformer:
         sr_roi=None,
         nodes: int | None = None,
         ring_scale: float = 1.0,
+        groups=None,
         tol: float = 1e-3,
         max_iter: int = 1000,
         init: str = "identity",
@@ -372,19 +400,83 @@ class Deformer:
 
             if not np.all(np.asarray(rings) == 1):
                 raise InputError(f"energy '{energy}' has no rigidity map (rings must be 1)")
+            if groups is not None:
+                self._refuse_groups()
+            self.groups = None
             self.embedded = EmbeddedDeformation(mesh, handles, options["nodes"])
             self.problem = None
             self._rings = np.ones(mesh.n_vertices, dtype=np.int32)
             self._weight_notes = []
             return
+        self.groups = None
         self.problem = ARAPProblem.from_mesh(
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
             reorder=reorder, **options)
         self._rings = self.problem.energy.rings[self.problem.iperm]
         if sr_roi is not None:
             _check_outside_roi_is_held(mesh, sr_roi, handles)
-        self.backend = make_backend(self.problem, self.device)
+        if groups is not None:
+            self.problem = self._grouped(self.problem, groups)
+        self.backend = self._make_backend()
         self._weight_notes = self._check_rest_is_minimum()
+
+    # -- vertex groups (shared rotations, rigid parts) --------------------------------
+    def _refuse_groups(self) -> None:
+        takes = ", ".join(m.name for m in methods("library") if m.groups)
+        raise InputError(f"groups: energy '{self.energy}' takes no vertex groups (these "
+                         f"methods do: {takes})")
+
+    def _grouped(self, problem: ARAPProblem, groups) -> ARAPProblem:
+        """``problem`` with ``groups`` (checked), remembered in :attr:`groups`."""
+        from ..arap.grouped import as_groups, with_groups
+
+        if not method(self.energy).groups:
+            self._refuse_groups()
+        g = as_groups(groups, problem.n_vertices)
+        if g.rigid.any() and self.device != "cpu":
+            raise InputError(f"{g.source}: rigid parts solve on device='cpu' (their merged "
+                             "system is factorised there)")
+        grouped = with_groups(problem, g)
+        self.groups = g if grouped is not problem else None
+        return grouped
+
+    def _make_backend(self):
+        """The backend of :attr:`problem` on the device (wrapped when it has groups)."""
+        from ..arap.grouped import GroupedBackend, GroupedProblem
+
+        inner = make_backend(self.problem, self.device)
+        if isinstance(self.problem, GroupedProblem):
+            return GroupedBackend(inner, self.problem)
+        return inner
+
+    def set_groups(self, groups) -> None:
+        """Use other vertex groups (a :class:`~arapkit.mesh.groups.VertexGroups`, one
+        shared-rotation id per vertex, or None for none); refactorises at the next solve.
+
+        Examples
+        --------
+        >>> from arapkit.mesh.groups import VertexGroups
+        >>> from arapkit.mesh.shapes import bar
+        >>> m = bar()
+        >>> d = Deformer(m, [0])
+        >>> d.set_groups(VertexGroups.from_lists([("tip", [1, 2, 3], True)], m.n_vertices))
+        >>> d.groups.names
+        ('tip',)
+        """
+        from ..arap.grouped import GroupedProblem
+
+        if self.problem is None:
+            if groups is not None:
+                self._refuse_groups()
+            return
+        p = self.problem
+        plain = p.without_groups() if isinstance(p, GroupedProblem) else p
+        new = plain if groups is None else self._grouped(plain, groups)  # checked first
+        if groups is None:
+            self.groups = None
+        p.release_factor()
+        self.problem = new
+        self.backend = self._make_backend()
 
     # -- configuration (lazy refactorisation, as CGAL) -----------------------------
     def set_handles(self, handles) -> None:
@@ -409,7 +501,7 @@ class Deformer:
         r = check_rings(rings, p.n_vertices)  # a bad map is refused with the factor kept
         p.release_factor()  # of no use to the new map, and as large as the one to come
         self.problem = p.with_rings(r)
-        self.backend = make_backend(self.problem, self.device)
+        self.backend = self._make_backend()
         self._rings = self.problem.energy.rings[self.problem.iperm]
         self._weight_notes = self._check_rest_is_minimum()
 
@@ -508,7 +600,7 @@ class Deformer:
             return
         if self.backend.problem is not self.problem or not self.problem.factorised:
             if self.backend.problem.energy is not self.problem.energy:
-                self.backend = make_backend(self.problem, self.device)
+                self.backend = self._make_backend()
             was = self.problem.factorised
             self.backend.bind(self.problem)
             if not was and self.problem.elimination.factor is not None:

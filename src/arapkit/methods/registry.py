@@ -80,6 +80,10 @@ class MethodInfo:
     multires : bool
         Can be solved coarse to fine on a decimated proxy (``multires=True``,
         :mod:`arapkit.methods.multires`): a local/global descent method.
+    groups : bool
+        Takes vertex groups (``groups=``): shared-rotation groups and rigid parts
+        (:mod:`arapkit.arap.grouped`): a local/global method with one rotation per vertex
+        and no coupling between rotations.
     handle_tol : float
         How far a handle may end from its target, relative to the bounding-box diagonal:
         0 for hard constraints (eliminated, met to round-off), the soft constraints'
@@ -101,6 +105,7 @@ class MethodInfo:
     accelerate: bool = False
     volumetric: bool = False
     multires: bool = False
+    groups: bool = False
     handle_tol: float = 0.0
     options: dict[str, MethodOption] = field(default_factory=dict, hash=False)
     interfaces: frozenset[str] = field(default_factory=lambda: frozenset(INTERFACES))
