@@ -36,6 +36,7 @@ import viser
 from arapkit import validate
 from arapkit.editor.files import MESH_SUFFIXES, FileActions, safe_stem
 from arapkit.editor.geometry import UP_AXES, framing_distance, raycast
+from arapkit.editor.groups import GROUP_COLORS, groups_legend_html
 from arapkit.editor.panels import MAX_R, VIEWS, Panels
 from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, PointerTools
@@ -328,6 +329,9 @@ class EditorApp(Panels, PointerTools, FileActions):
         labels, colors, legend = None, (), ""
         if view == "Rigidity r":
             labels, colors, legend = ring_labels(st.rings), RING_COLORS, rings_legend_html()
+        elif view == "Groups":
+            labels, colors = st.groups.colour_labels(), (SHADED_COLOR, *GROUP_COLORS)
+            legend = groups_legend_html(st.groups)
         elif view == "Energy":
             if self.vertex_energy is None:
                 legend = "<i>energy appears after an r-ring ARAP solve</i>"
@@ -486,7 +490,7 @@ class EditorApp(Panels, PointerTools, FileActions):
                 self.status("No handles yet: see **Next** below.")
                 return None
             req = SolveRequest(st.mesh, idx, tgt, st.rings, dataclasses.replace(st.settings),
-                               live=live)
+                               live=live, groups=st.groups.vertex_groups())
             return self.worker.submit(req)
 
     def drag_handle(

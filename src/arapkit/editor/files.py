@@ -102,6 +102,7 @@ class FileActions:
     vertex_energy: np.ndarray | None
     up_mesh: Any
     up_rings: Any
+    up_groups: Any
     up_session: Any
     bt_save: Any
     bt_export: Any
@@ -115,6 +116,7 @@ class FileActions:
         """Bind the upload and export widgets, and guard uploads while they arrive."""
         ui = self.ui
         self.up_rings.on_upload(ui(self._upload_rings))
+        self.up_groups.on_upload(ui(self._upload_groups))
         self.bt_save.on_click(ui(self._save_session))
         self.up_session.on_upload(ui(self._upload_session))
         self.bt_export.on_click(ui(self._export))
@@ -220,6 +222,23 @@ class FileActions:
             self.after_edit()
             return rings
 
+    def load_groups_bytes(self, name: str, data: bytes) -> Any:
+        """Use an uploaded groups file (JSON, an id file or a PLY with ``part``/``group``)
+        as the painted groups; undoable. Returns the groups read."""
+        from arapkit.io import load_groups
+
+        self._check_upload(name, data, "groups files")
+        with self.lock:
+            mesh = self.state.mesh
+            welded = getattr(mesh, "welded_from", None)
+            source = mesh if welded is None else welded.source
+            groups = self._via_tempfile(
+                name, data, lambda p: load_groups(p, source.vertices,
+                                                  welded=None if welded is None else mesh))
+            self.state.load_groups(groups)
+            self.after_edit()
+            return groups
+
     def load_session_bytes(self, name: str, data: bytes) -> None:
         """Apply an uploaded session to the loaded mesh (never opens a path it names)."""
         self._check_upload(name, data, "sessions")
@@ -244,6 +263,11 @@ class FileActions:
         f = self.up_rings.value
         rings = self.load_rings_bytes(f.name, f.content)
         self.notify(event, "Rings loaded", f"{f.name}: r from {rings.min()} to {rings.max()}")
+
+    def _upload_groups(self, event: Any) -> None:
+        f = self.up_groups.value
+        groups = self.load_groups_bytes(f.name, f.content)
+        self.notify(event, "Groups loaded", f"{f.name}: {groups.summary()}")
 
     def _upload_session(self, event: Any) -> None:
         f = self.up_session.value

@@ -41,7 +41,8 @@ __all__ = ["JOB_KEYS", "dry_run", "job_hash", "job_spec", "load_jobs", "normalis
 
 #: Keys a job object may have (``mesh``, ``handles`` and ``output`` are required).
 JOB_KEYS = ("mesh", "handles", "transform", "rings", "rings_file", "weights", "energy",
-            "sr_alpha", "nodes", "weld", "tol", "max_iter", "init", "accelerate", "output")
+            "sr_alpha", "nodes", "weld", "tol", "max_iter", "init", "accelerate", "output",
+            "groups")
 #: every optional key of :data:`JOB_KEYS` and its default
 _DEFAULTS = {k: JOB_DEFAULTS[k] for k in JOB_KEYS if k in JOB_DEFAULTS}
 
@@ -152,6 +153,8 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
     for key in ("transform", "rings_file"):
         if job[key] is not None:
             job[key] = _path(job[key], key, base, where)
+    if job["groups"] is not None and not isinstance(job["groups"], (list, dict)):
+        job["groups"] = _path(job["groups"], "groups", base, where)  # inline: as handles
     if "rings" in obj and "rings_file" in obj:
         raise InputError(f"{where}: give 'rings' or 'rings_file', not both")
     # the rules of the library's own parameters (arapkit.validate), with the job's location
@@ -169,13 +172,14 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
     if job["accelerate"] is not None and not isinstance(job["accelerate"], bool):
         raise InputError(f"{where}: 'accelerate' must be true or false")
     _check_output(job["output"], where)
-    return {k: job[k] for k in JOB_KEYS}
+    # a job without groups has no "groups" key: its hash (and a resumed run) stays as it was
+    return {k: job[k] for k in JOB_KEYS if k != "groups" or job[k] is not None}
 
 
 def job_spec(job: dict) -> DeformJob:
     """The library's :class:`~arapkit.workflows.jobs.DeformJob` of a checked job (without
     ``output``)."""
-    return DeformJob(**{k: job[k] for k in JOB_KEYS if k != "output"})
+    return DeformJob(**{k: job[k] for k in JOB_KEYS if k != "output" and k in job})
 
 
 def load_jobs(path: str | os.PathLike) -> list[dict]:
