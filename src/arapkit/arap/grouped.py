@@ -228,8 +228,8 @@ def with_groups(problem: ARAPProblem, groups) -> ARAPProblem:
     own["timings"] = dict(problem.timings)
     layout = None
     if g.rigid.any():
-        layout = PartLayout.build(problem.graph, problem.energy.system_w,
-                                  g.of_kind(True)[problem.perm], g.names_of_kind(True))
+        layout = PartLayout.build(problem.graph, g.of_kind(True)[problem.perm],
+                                  g.names_of_kind(True))
     return _pooled(GroupedProblem(**own, groups=g, layout=layout))
 
 

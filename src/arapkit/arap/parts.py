@@ -40,7 +40,7 @@ Examples
 >>> from arapkit.mesh.shapes import bar
 >>> p = ARAPProblem.from_mesh(bar(segments=(8, 2, 2)), [0])
 >>> part = np.full(p.n_vertices, -1); part[p.iperm[40:60]] = 0
->>> lay = PartLayout.build(p.graph, p.energy.system_w, part, ("middle",))
+>>> lay = PartLayout.build(p.graph, part, ("middle",))
 >>> lay.n_parts, int(lay.sizes[0]), lay.colour.tolist()
 (1, 20, [0])
 """
@@ -87,8 +87,8 @@ class PartLayout:
     cross_part, cross_i, cross_j : (c,) int64
         Every edge leaving a part, once per part it leaves: ``cross_i`` in
         ``cross_part``, ``cross_j`` outside it.
-    cross_w : (c,) float
-        The edge's global weight ``D_e``.
+    cross_edge : (c,) int64
+        That edge's id (its weight ``D_e`` is the energy's: a new rigidity map changes it).
     colour : (P,) int64
         Parts joined by an edge have different colours (fitted one after the other).
     """
@@ -100,12 +100,11 @@ class PartLayout:
     cross_part: np.ndarray
     cross_i: np.ndarray
     cross_j: np.ndarray
-    cross_w: np.ndarray
+    cross_edge: np.ndarray
     colour: np.ndarray
 
     @classmethod
-    def build(cls, graph: EdgeGraph, system_w: np.ndarray, part: np.ndarray,
-              names: tuple[str, ...]) -> PartLayout:
+    def build(cls, graph: EdgeGraph, part: np.ndarray, names: tuple[str, ...]) -> PartLayout:
         """The layout of ``part`` (one id per vertex of ``graph``, -1 for none)."""
         part = np.asarray(part, dtype=np.int64)
         k = len(names)
@@ -121,10 +120,10 @@ class PartLayout:
         cross_part = np.concatenate([pa[out_a], pb[out_b]])
         cross_i = np.concatenate([E[out_a, 0], E[out_b, 1]]).astype(np.int64)
         cross_j = np.concatenate([E[out_a, 1], E[out_b, 0]]).astype(np.int64)
-        cross_w = np.concatenate([system_w[out_a], system_w[out_b]])
+        cross_edge = np.concatenate([np.flatnonzero(out_a), np.flatnonzero(out_b)])
         colour = _greedy_colours(k, pa[out_a & out_b], pb[out_a & out_b])
         return cls(part, tuple(names), ptr, verts.astype(np.int64), cross_part, cross_i,
-                   cross_j, cross_w, colour)
+                   cross_j, cross_edge.astype(np.int64), colour)
 
     @property
     def n_parts(self) -> int:
@@ -194,7 +193,7 @@ def hold_parts(layout: PartLayout, constrained: np.ndarray, rest: np.ndarray) ->
     --------
     >>> V = np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], float)
     >>> class G: edges = np.array([[0, 1], [1, 2], [0, 3]])
-    >>> lay = PartLayout.build(G, np.ones(3), np.zeros(4, np.int64), ("all",))
+    >>> lay = PartLayout.build(G, np.zeros(4, np.int64), ("all",))
     >>> [KINDS[hold_parts(lay, np.array(c), V).kind[0]] for c in ([], [1], [0, 2], [0, 2, 3])]
     ['free', 'pivot', 'hinge', 'fixed']
     """
@@ -247,6 +246,10 @@ class PartSystem:
         The columns of the global matrix of the vertices ``z`` lives on (``z_cols``).
     z_cols : (z,) int64
         The free parts' non-centre vertices, then the constrained vertices.
+    n_followers : int
+        How many of ``z_cols`` are free parts' non-centre vertices.
+    cross_w : (c,) float
+        ``D_e`` of the layout's crossing edges, for this energy.
     """
 
     layout: PartLayout
@@ -257,6 +260,7 @@ class PartSystem:
     A_z: sp.csr_matrix
     z_cols: np.ndarray
     n_followers: int
+    cross_w: np.ndarray
 
     @classmethod
     def build(cls, layout: PartLayout, graph: EdgeGraph, system_w: np.ndarray,
@@ -296,7 +300,8 @@ class PartSystem:
         z_cols = np.concatenate([followers, cons]).astype(np.int64)
         A_z = L[:, z_cols].tocsr()
         a_v = rest[layout.verts] - rest[centre_of]
-        return cls(layout, holds, el, a_v, gather, A_z, z_cols, len(followers))
+        return cls(layout, holds, el, a_v, gather, A_z, z_cols, len(followers),
+                   system_w[layout.cross_edge])
 
     # -- the parts' motions ------------------------------------------------------------
     def place(self, P: np.ndarray, R: np.ndarray, parts: np.ndarray | None = None) -> None:
@@ -328,7 +333,7 @@ class PartSystem:
         bv = b[lay.verts]
         ci = self._cross_slot
         d = P[lay.cross_j] - P[hold.centre[lay.cross_part]]
-        ac = self.a[ci] * lay.cross_w[:, None]
+        ac = self.a[ci] * self.cross_w[:, None]
         for r in range(3):
             for c in range(3):
                 M[:, r, c] = (np.bincount(lay.vert_part, self.a[:, r] * bv[:, c], k)
@@ -346,7 +351,7 @@ class PartSystem:
     def fit(self, P: np.ndarray, b: np.ndarray, R: np.ndarray) -> float:
         """The local step of the parts: each moving part's best rotation with its centre
         held, colour by colour (``P`` and ``R`` updated in place). Returns the energy's
-        change, ``-2 sum_P tr((R_new - R_old) M_P)`` (never positive)."""
+        change, ``-2 sum_P tr((R_new - R_old) M_P)`` (not positive, up to round-off)."""
         lay, hold = self.layout, self.holds
         moving = hold.kind != FIXED
         dE = 0.0
@@ -358,13 +363,12 @@ class PartSystem:
             hinge = hold.kind[parts] == HINGE
             if hinge.any():
                 new[hinge] = self._hinge(P, parts[hinge], old[hinge], M[hinge])
+            # the exact block minimiser: taken even when round-off makes it look a hair
+            # worse (refusing it would stall the positions at sqrt(eps))
             gain = np.einsum("pab,pba->p", new, M) - np.einsum("pab,pba->p", old, M)
-            # round-off may make a part's best fit a hair worse than its old rotation:
-            # keep the old one then, so that the energy never rises
-            better = gain > 0
-            R[parts[better]] = new[better]
-            dE -= 2.0 * float(gain[better].sum())
-            self.place(P, R, parts[better])
+            R[parts] = new
+            dE -= 2.0 * float(gain.sum())
+            self.place(P, R, parts)
         return dE
 
     def _hinge(self, P: np.ndarray, parts: np.ndarray, old: np.ndarray,
