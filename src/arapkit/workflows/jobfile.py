@@ -26,6 +26,7 @@ from typing import Any
 from ..errors import InputError
 from ..mesh.weights import WEIGHT_KINDS
 from ..methods.deformer import INITS, check_method
+from ..methods.registry import method, methods
 from ..validate import iteration_cap, read_input, ring_size, tolerance
 from .jobs import (
     ENERGIES,
@@ -69,6 +70,10 @@ def _check_method(job: dict, where: str) -> None:
         check_method(job["energy"], job["sr_alpha"], job["nodes"])
     except InputError as e:
         raise InputError(f"{where}: {e}") from None
+    if job.get("groups") is not None and not method(job["energy"]).groups:
+        takes = ", ".join(m.name for m in methods("batch") if m.groups)
+        raise InputError(f"{where}: 'groups': energy {job['energy']} takes no vertex groups "
+                         f"(these methods do: {takes})")
 
 
 def _check_weld(value: Any, where: str) -> float | None:
