@@ -370,3 +370,59 @@ def test_layer_refuses_rigid_parts_off_the_cpu(small_bar):
     g = VertexGroups.from_lists([("A", A, True)], m.n_vertices)
     with pytest.raises(InputError, match="device='cpu'"):
         ARAPLayer(m, h, groups=g, device="cuda:0", dtype=torch.float64)
+
+
+# ------------------------------------------------------------------ the command line
+
+
+def test_cli_rigid_arm_and_its_refusals(tmp_path, capsys, cactus):
+    from arapkit.cli import main
+
+    m, _ = cactus
+    out, rep = tmp_path / "arm.ply", tmp_path / "arm.json"
+    code = main(["deform", str(CACTUS), "--handles", str(CACTUS_HANDLES), "--groups",
+                 str(CACTUS_GROUPS), "-o", str(out), "--report", str(rep), "-q"])
+    assert code == 0, capsys.readouterr().err
+    from arapkit.io import read_ply_vertex_properties
+
+    p = read_ply_vertex_properties(out)
+    X = np.stack([p["x"], p["y"], p["z"]], axis=1)
+    g = load_groups(CACTUS_GROUPS, m)
+    assert _stretch(m, X, g.members(0)) < RIGID_TOL
+    report = json.loads(rep.read_text())
+    assert report["vertex_groups"]["groups"][0] == {"name": "left arm", "count": 440,
+                                                    "rigid": True}
+    # a hand that no rigid motion of the arm meets: one line naming the part, exit 2
+    bad = tmp_path / "torn.json"
+    hands = json.loads(CACTUS_HANDLES.read_text())
+    hands["groups"].append({"name": "elbow", "box": {"min": [-4.5, 5, -2], "max": [-3, 6, 2]},
+                            "translate": [0, 0, 1]})
+    bad.write_text(json.dumps(hands))
+    capsys.readouterr()
+    code = main(["deform", str(CACTUS), "--handles", str(bad), "--groups", str(CACTUS_GROUPS),
+                 "-o", str(tmp_path / "x.ply"), "-q"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and len(err.splitlines()) == 1, err
+    assert "rigid part 'left arm'" in err and str(CACTUS_GROUPS) in err
+    # a groups file error names the file and the entry
+    broken = tmp_path / "broken.json"
+    broken.write_text(json.dumps([{"name": "arm", "sphere": {"center": [0, 0, 0]}}]))
+    code = main(["deform", str(CACTUS), "--handles", str(CACTUS_HANDLES), "--groups",
+                 str(broken), "-o", str(tmp_path / "y.ply"), "-q"])
+    err = capsys.readouterr().err.strip()
+    assert code == 2 and err.endswith(f"{broken}: group 1 ('arm'): 'sphere' needs 'radius'")
+    assert not (tmp_path / "x.ply").exists() and not (tmp_path / "y.ply").exists()
+    # a method without groups refuses them before reading anything
+    code = main(["deform", str(CACTUS), "--handles", str(CACTUS_HANDLES), "--groups",
+                 str(CACTUS_GROUPS), "--energy", "sr-arap", "-o", str(tmp_path / "z.ply")])
+    assert code == 2 and "takes no vertex groups" in capsys.readouterr().err
+
+
+def test_cli_dry_run_lists_the_groups(capsys):
+    from arapkit.cli import main
+
+    code = main(["deform", str(CACTUS), "--handles", str(CACTUS_HANDLES), "--groups",
+                 str(CACTUS_GROUPS), "--dry-run"])
+    out = capsys.readouterr().out
+    assert code == 0 and "left arm: 440 vertices, rigid part" in out
+    assert "right arm: 368 vertices, shared rotation" in out

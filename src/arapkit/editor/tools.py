@@ -155,8 +155,8 @@ TOOLS: tuple[Tool, ...] = (
          click=_fill, paints=True),
     Tool("part", "Paint part",
          "Click or Shift+drag puts the vertices within the radius in the **Group** chosen "
-         "in *Groups* (*(erase)* takes them out): a rigid part moves as one piece, a "
-         "shared-rotation group turns as one.",
+         "in *Groups*; the group *(erase)* takes them out. A rigid part moves as one "
+         "piece, a shared-rotation group turns as one.",
          click=_paint_part, paints=True, brush=True, dab=_dab_part, stroke_rgb=_part_rgb,
          view="Groups"),
 )
