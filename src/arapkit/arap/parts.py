@@ -51,12 +51,13 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import TYPE_CHECKING
 
+import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
 from ..errors import InputError
 from .constraints import Elimination, rigid_motions
-from .rotations import fit_rotations
+from .rotations import fit_rotation_range
 
 if TYPE_CHECKING:
     from .graph import EdgeGraph
@@ -139,6 +140,22 @@ class PartLayout:
     def vert_part(self) -> np.ndarray:
         """The part of each entry of :attr:`verts`."""
         return np.repeat(np.arange(self.n_parts, dtype=np.int64), self.sizes)
+
+
+@nb.njit(cache=True, nogil=True)
+def _place(P, R, slots, vert_part, verts, a, centre):  # pragma: no cover - compiled
+    """``P[verts[s]] = R[p] a[s] + P[centre[p]]`` for each slot ``s`` (part ``p``): one
+    pass, where NumPy's ``R[vert_part]`` alone is 9 doubles a vertex. A part's centre has
+    ``a = 0``, so writing it keeps its value for the part's later vertices."""
+    for i in range(slots.shape[0]):
+        s = slots[i]
+        p = vert_part[s]
+        c = centre[p]
+        cx, cy, cz = P[c, 0], P[c, 1], P[c, 2]
+        v = verts[s]
+        for r in range(3):
+            P[v, r] = R[p, r, 0] * a[s, 0] + R[p, r, 1] * a[s, 1] + R[p, r, 2] * a[s, 2] + (
+                cx if r == 0 else cy if r == 1 else cz)
 
 
 def _greedy_colours(k: int, a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -304,16 +321,17 @@ class PartSystem:
                    system_w[layout.cross_edge])
 
     # -- the parts' motions ------------------------------------------------------------
-    def place(self, P: np.ndarray, R: np.ndarray, parts: np.ndarray | None = None) -> None:
-        """Put the vertices of the moving parts (all but the fixed ones, or ``parts``) at
-        ``R_P a_v + P[centre]``, in place."""
-        lay, hold = self.layout, self.holds
-        sel = hold.kind[lay.vert_part] != FIXED
-        if parts is not None:
-            sel &= np.isin(lay.vert_part, parts)
-        vp = lay.vert_part[sel]
-        P[lay.verts[sel]] = (np.einsum("vab,vb->va", R[vp], self.a[sel])
-                             + P[hold.centre[vp]])
+    def place(self, P: np.ndarray, R: np.ndarray, slots: np.ndarray | None = None) -> None:
+        """Put the vertices of the moving parts (all but the fixed ones; or the entries
+        ``slots`` of ``layout.verts``) at ``R_P a_v + P[centre]``, in place."""
+        sel = self._moving_slots if slots is None else slots
+        _place(P, np.ascontiguousarray(R), sel, self.layout.vert_part, self.layout.verts,
+               self.a, self.holds.centre)
+
+    @cached_property
+    def _moving_slots(self) -> np.ndarray:
+        """The entries of ``layout.verts`` in moving parts."""
+        return np.flatnonzero(self.holds.kind[self.layout.vert_part] != FIXED)
 
     def sync(self, P: np.ndarray) -> np.ndarray:
         """The parts' rotations fitted to ``P`` (a start shape), with ``P`` made rigid on
@@ -325,19 +343,29 @@ class PartSystem:
         self.place(P, R)
         return R
 
-    def moments(self, P: np.ndarray, b: np.ndarray) -> np.ndarray:
-        """``M_P`` of every part at positions ``P`` and vertex right-hand sides ``b``."""
+    def moments(self, P: np.ndarray, b: np.ndarray, own: np.ndarray | None = None
+                ) -> np.ndarray:
+        """``M_P`` of every part at positions ``P`` and vertex right-hand sides ``b``;
+        ``own`` (:meth:`own_moments`, which does not move with ``P``) when known."""
         lay, hold = self.layout, self.holds
         k = lay.n_parts
-        M = np.empty((k, 3, 3))
-        bv = b[lay.verts]
-        ci = self._cross_slot
+        M = self.own_moments(b) if own is None else own.copy()
         d = P[lay.cross_j] - P[hold.centre[lay.cross_part]]
-        ac = self.a[ci] * self.cross_w[:, None]
+        ac = self.a[self._cross_slot] * self.cross_w[:, None]
         for r in range(3):
             for c in range(3):
-                M[:, r, c] = (np.bincount(lay.vert_part, self.a[:, r] * bv[:, c], k)
-                              + np.bincount(lay.cross_part, ac[:, r] * d[:, c], k))
+                M[:, r, c] += np.bincount(lay.cross_part, ac[:, r] * d[:, c], k)
+        return M
+
+    def own_moments(self, b: np.ndarray) -> np.ndarray:
+        """``sum_{v in P} a_v b_v^T`` of every part: ``M_P`` less its crossing edges."""
+        lay = self.layout
+        k = lay.n_parts
+        bv = b[lay.verts]
+        M = np.empty((k, 3, 3))
+        for r in range(3):
+            for c in range(3):
+                M[:, r, c] = np.bincount(lay.vert_part, self.a[:, r] * bv[:, c], k)
         return M
 
     @cached_property
@@ -348,18 +376,30 @@ class PartSystem:
         slot[lay.verts] = np.arange(len(lay.verts))
         return slot[lay.cross_i]
 
+    @cached_property
+    def _colours(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The moving parts colour by colour, each with its entries of ``layout.verts``."""
+        lay = self.layout
+        moving = self.holds.kind != FIXED
+        out = []
+        for c in np.unique(lay.colour[moving]):
+            parts = np.flatnonzero(moving & (lay.colour == c))
+            out.append((parts, np.flatnonzero(np.isin(lay.vert_part, parts))))
+        return out
+
     def fit(self, P: np.ndarray, b: np.ndarray, R: np.ndarray) -> float:
         """The local step of the parts: each moving part's best rotation with its centre
         held, colour by colour (``P`` and ``R`` updated in place). Returns the energy's
         change, ``-2 sum_P tr((R_new - R_old) M_P)`` (not positive, up to round-off)."""
-        lay, hold = self.layout, self.holds
-        moving = hold.kind != FIXED
+        hold = self.holds
         dE = 0.0
-        for c in np.unique(lay.colour[moving]):
-            parts = np.flatnonzero(moving & (lay.colour == c))
-            M = self.moments(P, b)[parts]
+        own = self.own_moments(b) if self._colours else None
+        for parts, slots in self._colours:
+            M = self.moments(P, b, own)[parts]
             old = R[parts]
-            new = fit_rotations(M)
+            new = np.empty_like(M)
+            # serial: a few matrices, where a parallel region would cost a time slice
+            fit_rotation_range(np.ascontiguousarray(M), new, 0, len(M))
             hinge = hold.kind[parts] == HINGE
             if hinge.any():
                 new[hinge] = self._hinge(P, parts[hinge], old[hinge], M[hinge])
@@ -368,7 +408,7 @@ class PartSystem:
             gain = np.einsum("pab,pba->p", new, M) - np.einsum("pab,pba->p", old, M)
             R[parts] = new
             dE -= 2.0 * float(gain.sum())
-            self.place(P, R, parts)
+            self.place(P, R, slots)
         return dE
 
     def _hinge(self, P: np.ndarray, parts: np.ndarray, old: np.ndarray,
