@@ -228,5 +228,11 @@ def test_shipped_handle_files_resolve():
         meshes = re.findall(r"examples/(\w+\.off)", comment)
         assert meshes, f"{f.name}: its comment should name the mesh it is for"
         mesh = load_mesh(ROOT / "examples" / meshes[0])
+        if f.name.endswith("-groups.json"):  # vertex groups (docs/groups.md), not handles
+            from arapkit import load_groups
+
+            g = load_groups(f, mesh)
+            assert g.n_groups >= 1 and (g.sizes > 0).all()
+            continue
         hs = load_handles(f, mesh.vertices)
         assert len(hs.groups) >= 2 and all(len(g.indices) for g in hs.groups)
