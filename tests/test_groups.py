@@ -245,6 +245,21 @@ def test_groups_follow_set_handles_set_rings_and_warm_starts(small_bar):
     assert d.groups is None and _stretch(m, d.solve(t).vertices, A) > 1e-3
 
 
+def test_new_targets_reuse_the_merged_factor_and_large_meshes_solve_in_full(small_bar):
+    from types import SimpleNamespace
+
+    from arapkit.methods.deformer import MULTIRES_AUTO_VERTICES, coarse_to_fine
+
+    m, h, t, A, _ = small_bar
+    d = Deformer(m, h, groups=VertexGroups.from_lists([("A", A, True)], m.n_vertices))
+    for k in range(3):
+        res = d.solve(t + [0.0, 0.0, 0.1 * k])
+        assert _stretch(m, res.vertices, A) < RIGID_TOL
+    assert d.factorisations == 1
+    big = SimpleNamespace(n_vertices=MULTIRES_AUTO_VERTICES)
+    assert coarse_to_fine(big, None, {}) and not coarse_to_fine(big, None, {"groups": [0]})
+
+
 def test_methods_without_groups_refuse_them(small_bar):
     from arapkit.methods.registry import methods
 

@@ -280,4 +280,6 @@ def dry_run(path: str | os.PathLike) -> list[str]:
                      f"vertices), {len(hs.indices)} handle vertices in {len(hs.groups)} "
                      "group(s)")
         lines += [f"  {line}" for line in describe_groups(inputs.mesh.vertices, hs)]
+        if inputs.groups is not None:
+            lines.append(f"  vertex groups: {inputs.groups.summary()}")
     return lines

@@ -176,10 +176,10 @@ class JobInputs:
     handles: Any
     rings: np.ndarray | int
     notes: list[str] = field(default_factory=list)
-    #: the job's vertex groups on ``mesh`` (None for none)
-    groups: Any = None
     #: records a further note (e.g. the deformer's) like the loader's
     tell: Callable[[str], None] | None = field(default=None, repr=False)
+    #: the job's vertex groups on ``mesh`` (None for none)
+    groups: Any = None
 
 
 def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -> JobInputs:
@@ -231,9 +231,7 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
             rings = weld_values(mesh, np.asarray(rings))
     else:
         rings = int(job.rings)
-    inputs = JobInputs(source, mesh, hs, rings, notes, tell)
-    inputs.groups = _load_groups(job, source, mesh)
-    return inputs
+    return JobInputs(source, mesh, hs, rings, notes, tell, _load_groups(job, source, mesh))
 
 
 def _load_groups(job: DeformJob, source: Any, mesh: Any):
