@@ -301,7 +301,8 @@ class FileActions:
             return st.save_session(out / f"{stem}-session.json")
 
     def export(self) -> list[Path]:
-        """Write the deformed mesh (PLY with r and energy per vertex) and the rings file.
+        """Write the deformed mesh (PLY with r and energy per vertex), the rings file and,
+        when groups are painted, the groups file (``--groups`` reads it back).
 
         Everything the mesh's file carried comes along (``save_mesh(like=...)``); a mesh
         loaded from OBJ is also exported as OBJ, which keeps its UVs and materials.
@@ -323,6 +324,16 @@ class FileActions:
             rings = st.rings if welded is None else st.rings[welded.index]
             save_rings(rings_path, rings)
             paths = [mesh_path, rings_path]
+            groups = st.groups.vertex_groups()
+            if groups is not None:  # the painted parts, as a groups file of the input
+                from arapkit.io import save_groups
+                from arapkit.mesh.groups import VertexGroups
+
+                if welded is not None:
+                    groups = VertexGroups(groups.ids[welded.index], groups.names,
+                                          groups.rigid, groups.source)
+                paths.append(out / f"{stem}-groups.json")
+                save_groups(paths[-1], groups)
             attrs = getattr(source, "attributes", None)
             if attrs is not None and attrs.source_format == "obj":
                 obj_path = out / f"{stem}-deformed.obj"
