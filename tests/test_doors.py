@@ -34,6 +34,10 @@ from arapkit.methods.registry import (
 ROOT = Path(__file__).resolve().parents[1]
 MESH = ROOT / "examples" / "cactus.off"
 HANDLES = ROOT / "examples" / "cactus.json"
+#: a rigid left arm (held by its hand's handles) and a right arm with one shared rotation
+GROUPS = ROOT / "examples" / "cactus-groups.json"
+#: a rigid part keeps its edge lengths to this, relative to each edge
+RIGID_TOL = 1e-9
 #: hard constraints: met to round-off of the bounding-box diagonal
 HARD_TOL = 1e-9
 #: free vertices must move at least this much (relative to the diagonal): the arms swing
@@ -51,12 +55,14 @@ class Variant:
     rings: str = "1"
     volumetric: bool = False
     init: str = "identity"
+    groups: bool = False
 
     @property
     def id(self) -> str:
         extra = [f"r{self.rings}"] if self.rings != "1" else []
         extra += ["volumetric"] * self.volumetric + (["laplacian-init"] if self.init !=
                                                       "identity" else [])
+        extra += ["groups"] * self.groups
         return "-".join([self.energy, *extra])
 
     def refusal(self, interface: str) -> str | None:
@@ -70,6 +76,8 @@ class Variant:
             return "volumetric=True runs r-ring ARAP"
         if self.rings != "1" and not can.rigidity_map:
             return "has no rigidity map"
+        if self.groups and not can.groups:
+            return "takes no vertex groups"
         return None
 
 
@@ -83,7 +91,9 @@ def _variants() -> list[Variant]:
     for e in method_names():
         vol_r = "mixed" if method(e).rigidity_map else "1"
         out += [Variant(e), Variant(e, "3"), Variant(e, "mixed"),
-                Variant(e, vol_r, volumetric=True), Variant(e, init="laplacian")]
+                Variant(e, vol_r, volumetric=True), Variant(e, init="laplacian"),
+                # rigid parts and shared rotations, with the mixed map where there is one
+                Variant(e, vol_r, groups=True)]
     return out
 
 
@@ -95,15 +105,17 @@ def _expressible(v: Variant, interface: str) -> bool:
         from arapkit.workflows.compare import RINGS_METHOD
 
         return interface in can.interfaces and v.refusal(interface) is None \
-            and v.init == "identity" and (v.rings == "1" or v.energy == RINGS_METHOD)
-    if interface == "editor":  # the painted map is ignored by methods without one
+            and v.init == "identity" and (v.rings == "1" or v.energy == RINGS_METHOD) \
+            and not v.groups
+    if interface == "editor":  # painted r and groups are ignored by methods without them
         return interface in can.interfaces and v.init == "identity" and (
-            v.rings == "1" or can.rigidity_map) and (not v.volumetric or can.volumetric)
+            v.rings == "1" or can.rigidity_map) and (not v.volumetric or can.volumetric) \
+            and (not v.groups or can.groups)
     if interface == "torch":
         return not v.volumetric and v.init == "identity"
     if interface == "blender":  # its Method menu lists only what it offers; no volume, no init
         return interface in can.interfaces and v.init == "identity" and not v.volumetric and (
-            v.rings == "1" or can.rigidity_map)
+            v.rings == "1" or can.rigidity_map) and not v.groups
     return True
 
 
@@ -143,7 +155,7 @@ def folder(tmp_path_factory) -> Path:
 
 
 def _check_deformed(v: Variant, V: np.ndarray) -> None:
-    """Finite, deformed beyond the handles, handles at their targets."""
+    """Finite, deformed beyond the handles, handles at their targets, rigid parts rigid."""
     mesh, hs, _ = _case()
     diag = mesh.bounding_box_diagonal
     assert V.shape == mesh.vertices.shape and np.isfinite(V).all()
@@ -151,6 +163,19 @@ def _check_deformed(v: Variant, V: np.ndarray) -> None:
     assert np.linalg.norm(V[free] - mesh.vertices[free], axis=1).max() > MIN_MOTION * diag
     err = np.linalg.norm(V[hs.indices] - hs.targets, axis=1).max()
     assert err <= max(method(v.energy).handle_tol, HARD_TOL) * diag
+    if v.groups:
+        g = _groups()
+        E = mesh.edges[np.isin(mesh.edges, g.members(int(np.argmax(g.rigid)))).all(axis=1)]
+        rest = np.linalg.norm(mesh.vertices[E[:, 0]] - mesh.vertices[E[:, 1]], axis=1)
+        now = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+        assert np.abs(now / rest - 1).max() < RIGID_TOL
+
+
+@cache
+def _groups():
+    from arapkit.io import load_groups
+
+    return load_groups(GROUPS, _case()[0])
 
 
 # ---------------------------------------------------------------------------- interfaces
@@ -159,6 +184,8 @@ def _check_deformed(v: Variant, V: np.ndarray) -> None:
 def _library(v: Variant, folder: Path) -> np.ndarray:
     mesh, hs, _ = _case()
     kw = {"volumetric": True} if v.volumetric else {}
+    if v.groups:
+        kw["groups"] = _groups()
     d = Deformer(mesh, hs.indices, rings=_rings(v), energy=v.energy, init=v.init, **kw)
     return d.solve(hs.targets).vertices
 
@@ -181,7 +208,7 @@ def _deform(v: Variant, folder: Path, capsys) -> np.ndarray:
     out = folder / f"{v.id}.ply"
     argv = ["deform", str(MESH), "--handles", str(HANDLES), "--energy", v.energy,
             *_cli_rings(v, folder), "--init", v.init, *(["--volumetric"] * v.volumetric),
-            "-o", str(out), "-q", "--force"]
+            *(["--groups", str(GROUPS)] * v.groups), "-o", str(out), "-q", "--force"]
     capsys.readouterr()
     code = main(argv)
     err = capsys.readouterr().err.strip()
@@ -235,6 +262,8 @@ def _batch(v: Variant, folder: Path, capsys) -> np.ndarray:
         job["rings"] = int(v.rings)
     if v.volumetric:
         job["volumetric"] = True
+    if v.groups:
+        job["groups"] = str(GROUPS)
     row = run_job(normalise_job(job, folder), folder / "batch", resume=False)
     if row["status"] != "ok":
         assert row["status"] == "failed" and "\n" not in row["error"]
@@ -255,7 +284,8 @@ def _editor(v: Variant, folder: Path, capsys) -> np.ndarray:
         painted = np.broadcast_to(_rings(v), (mesh.n_vertices,)).astype(np.int32)
         w.submit(SolveRequest(mesh, hs.indices, hs.targets, painted,
                               SolverSettings(method=v.energy, volumetric=v.volumetric,
-                                             max_iter=1000)))
+                                             max_iter=1000),
+                              groups=_groups() if v.groups else None))
         assert w.wait_idle(300)
     finally:
         w.stop()
@@ -272,7 +302,7 @@ def _torch(v: Variant, folder: Path, capsys) -> np.ndarray:
 
     mesh, hs, _ = _case()
     layer = ARAPLayer(mesh, hs.indices, rings=_rings(v), energy=v.energy,
-                      dtype=torch.float64)
+                      dtype=torch.float64, **({"groups": _groups()} if v.groups else {}))
     return layer(torch.tensor(hs.targets)).detach().numpy()
 
 

@@ -49,7 +49,8 @@ README = ROOT / "README.md"
 #: the pages whose examples are run, each on its own (the README first)
 PAGES = ("README.md", "docs/solver.md", "docs/handles.md", "docs/cli.md", "docs/learning.md",
          "docs/editor.md", "docs/torch.md", "docs/volumetric.md", "docs/interactive.md",
-         "docs/dynamics.md", "docs/smooth-arap.md", "docs/2d.md")
+         "docs/dynamics.md", "docs/smooth-arap.md", "docs/2d.md",
+         "docs/groups.md")
 #: docs pages with blocks that look runnable but are not, and why
 NOT_RUN_PAGES = {
     "docs/api-contract.md": "a signature sheet (names and defaults, not a program)",
@@ -262,5 +263,11 @@ def test_shipped_handle_files_resolve():
         meshes = re.findall(r"examples/(\w+\.off)", comment)
         assert meshes, f"{f.name}: its comment should name the mesh it is for"
         mesh = load_mesh(ROOT / "examples" / meshes[0])
+        if f.name.endswith("-groups.json"):  # vertex groups (docs/groups.md), not handles
+            from arapkit import load_groups
+
+            g = load_groups(f, mesh)
+            assert g.n_groups >= 1 and (g.sizes > 0).all()
+            continue
         hs = load_handles(f, mesh.vertices)
         assert len(hs.groups) >= 2 and all(len(g.indices) for g in hs.groups)

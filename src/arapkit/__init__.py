@@ -27,6 +27,7 @@ from .errors import InputError  # noqa: E402
 from .io import (
     HandleGroup,
     HandleSet,
+    load_groups,
     load_handles,
     load_mesh,
     load_rings,
@@ -41,6 +42,7 @@ from .io import (
     select_sphere,
 )
 from .learn.fit import LearnedRings, learn_rings
+from .mesh.groups import VertexGroups
 from .mesh.model import Mesh
 from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .methods.deformer import Deformer, Result
@@ -75,11 +77,13 @@ __all__ = [
     "Result",
     "Simulator",
     "UpGuess",
+    "VertexGroups",
     "__version__",
     "bounding_box",
     "guess_up",
     "laplacian_edit",
     "learn_rings",
+    "load_groups",
     "load_handles",
     "load_mesh",
     "load_rings",

@@ -234,6 +234,12 @@ class ARAPLayer(_torch.nn.Module):
     adjoint_tol, adjoint_max_iter :
         Relative residual and iteration cap of the backward's conjugate gradients
         (default 1e-10 in float64, 1e-5 in float32).
+    groups : VertexGroups or (n,) int, optional
+        Rigid parts and shared-rotation groups, as for :class:`arapkit.Deformer` (a plain
+        array is libigl's ``G``). Shared-rotation groups run on any device; with rigid
+        parts each pose is solved exactly by the CPU engine (float64, ``device="cpu"``) and
+        differentiated implicitly with the parts' rotations among the unknowns
+        (:mod:`arapkit.arap.backends.torch_parts`).
 
     Examples
     --------
@@ -255,7 +261,7 @@ class ARAPLayer(_torch.nn.Module):
                  energy: str = "rring", tol: float = 1e-3, max_iter: int = 1000,
                  dtype=_torch.float32, device="cpu", *, xtol: float | None = None,
                  adjoint_tol: float | None = None, adjoint_max_iter: int = 1000,
-                 dim: int | None = None) -> None:
+                 dim: int | None = None, groups=None) -> None:
         super().__init__()
         check_dtype(dtype)
         _check_layer_energy(energy)
@@ -270,8 +276,20 @@ class ARAPLayer(_torch.nn.Module):
         self._z = shape.z
         self.fit = planar_rotations if self.planar else fit_rotations
         problem = ARAPProblem.from_mesh(shape.mesh, handles, energy, weights, rings=rings)
+        self._parts = None
+        if groups is not None:
+            if self.planar:  # a part's fit is a 3 x 3 rotation
+                raise InputError("groups: vertex groups are solved in 3D; a planar layer "
+                                 "takes none (pass dim=3 to solve the shape in 3D)")
+            problem = _with_groups(problem, energy, groups, device)
+            if getattr(problem, "layout", None) is not None:
+                from .arap.backends.torch_parts import PartsAdjoint
+
+                self._parts = PartsAdjoint(problem)
         self.problem = problem
-        self.system = TorchSystem(problem, device, dtype).bind(problem)
+        self.system = TorchSystem(problem, device, dtype)
+        if self._parts is None:  # the parts' merged system is the CPU engine's
+            self.system.bind(problem)
         self.tol = tolerance(tol)
         self.max_iter = iteration_cap(max_iter)
         V = problem.vertices
@@ -307,7 +325,8 @@ class ARAPLayer(_torch.nn.Module):
         # the problem lives in units of problem.scale (a power of two: exact); autograd sees
         # the two scalings as ordinary operations
         s = self.problem.scale
-        X = _ARAPSolve.apply(T / s, self) * s
+        solve = _ARAPSolve if self._parts is None else _PartsSolve
+        X = solve.apply(T / s, self) * s
         if self.given_dim == 2:
             X = X[..., :2]
         return X if batched else X[0]
@@ -360,6 +379,73 @@ class ARAPLayer(_torch.nn.Module):
         if self._step_tol is not None and it > 1 and self.system.nf:
             passed |= step.abs().amax(dim=(1, 2)) <= self._step_tol
         return passed
+
+
+def _with_groups(problem: ARAPProblem, energy: str, groups, device):
+    """``problem`` with the layer's groups (refused where the method or device cannot)."""
+    from .arap.grouped import as_groups, with_groups
+    from .methods.registry import method, method_names
+
+    if not method(energy).groups:
+        takes = ", ".join(m for m in method_names("torch") if method(m).groups)
+        raise InputError(f"groups: energy '{energy}' takes no vertex groups (these methods "
+                         f"do: {takes})")
+    g = as_groups(groups, problem.n_vertices)
+    if g.rigid.any() and str(device) != "cpu":
+        raise InputError(f"{g.source}: rigid parts in ARAPLayer solve on device='cpu' (the "
+                         "exact parts run on the CPU engine)")
+    return with_groups(problem, g)
+
+
+class _PartsSolve(_torch.autograd.Function):
+    """A layer with rigid parts: each pose solved by the CPU engine of
+    :mod:`arapkit.arap.grouped`, the backward by
+    :class:`~arapkit.arap.backends.torch_parts.PartsAdjoint` (in the problem's units)."""
+
+    @staticmethod
+    def forward(ctx, T, layer: ARAPLayer):
+        import numpy as np
+
+        from .arap.backends.cpu import CPUBackend
+        from .arap.grouped import GroupedBackend
+        from .arap.loop import local_global
+
+        p = layer.problem
+        s = p.scale
+        if getattr(layer, "_backend", None) is None:
+            layer._backend = GroupedBackend(CPUBackend(p), p).bind(p)
+        be = layer._backend
+        free = p.elimination.free
+        out, ys, Rs, info = [], [], [], {"iterations": 0, "converged": True, "energy": []}
+        for Tb in T.detach().to(_torch.float64).cpu().numpy():
+            res = local_global(p, be, Tb * s, None, tol=layer.tol, max_iter=layer.max_iter)
+            V = res.vertices / s
+            out.append(V)
+            ys.append(V[p.perm][free])
+            Rs.append(be.R_cur.copy())
+            info["iterations"] = max(info["iterations"], res.iterations)
+            info["converged"] &= bool(res.converged)
+            info["energy"].append(res.energy)
+        info["energy"] = _torch.tensor(info["energy"])
+        layer.last_info = info
+        ctx.layer, ctx.ys, ctx.Rs = layer, ys, Rs
+        ctx.save_for_backward(T)
+        return _torch.as_tensor(np.stack(out), dtype=T.dtype, device=T.device)
+
+    @staticmethod
+    def backward(ctx, gX):
+        layer = ctx.layer
+        (T,) = ctx.saved_tensors
+        perm = _torch.as_tensor(layer.problem.perm)
+        adj = layer._parts
+        gT, its = [], 0
+        for b in range(T.shape[0]):
+            g, k = adj.vjp(ctx.ys[b], ctx.Rs[b], T[b], gX[b].to(_torch.float64)[perm],
+                           layer.adjoint_tol, layer.adjoint_max_iter)
+            gT.append(g)
+            its = max(its, k)
+        layer.last_info["adjoint_iterations"] = its
+        return _torch.stack(gT).to(T.dtype), None
 
 
 class _Frozen:

@@ -45,6 +45,8 @@ EXAMPLES = [
     "--rings-file examples/bar-rings.txt -o out.off",
     "arapkit deform examples/cactus.off --handles examples/cactus.json -o out.ply --report - "
     "--quiet | jq .result",
+    "arapkit deform examples/cactus.off --handles examples/cactus.json --groups "
+    "examples/cactus-groups.json -o rigid-arm.ply",
 ]
 
 
@@ -86,6 +88,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--rings-file",
         metavar="FILE",
         help="per-vertex r: text (one integer per line), .npy, or PLY vertex property 'rings'",
+    )
+    p.add_argument(
+        "--groups",
+        "-G",
+        metavar="FILE",
+        help="rigid parts and shared-rotation groups (docs/groups.md): JSON entries with "
+        "the handle files' selectors and \"rigid\": true|false, a per-vertex id file (.npy "
+        "or text: libigl's G, -1 for none), or PLY vertex properties 'part'/'group'",
     )
     kinds = WEIGHT_KINDS
     p.add_argument(
@@ -174,13 +184,19 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 def _check_method(args: argparse.Namespace) -> dict[str, Any]:
     """Fail fast on a bad method or option; the keyword arguments for the Deformer."""
     from arapkit.methods.deformer import check_method
-    from arapkit.methods.registry import method
+    from arapkit.methods.registry import method, methods
 
     options = check_method(args.energy, args.sr_alpha, args.nodes,
                            smooth_lambda=args.smooth_lambda)
     can = method(args.energy, "cli")
     if not can.rigidity_map and (args.rings_file or args.rings != 1):
         raise InputError(f"--energy {args.energy}: has no rigidity map (drop --rings/--rings-file)")
+    if args.groups and not can.groups:
+        takes = ", ".join(m.name for m in methods("cli") if m.groups)
+        raise InputError(f"--groups: --energy {args.energy} takes no vertex groups (these "
+                         f"methods do: {takes})")
+    if args.groups and args.volumetric:
+        raise InputError("--groups: vertex groups are for surface ARAP, not --volumetric")
     if not can.accelerate and args.accelerate:
         raise InputError(f"--accelerate: not available with --energy {args.energy} "
                          "(only for the local/global descent methods)")
@@ -243,7 +259,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
     """Fail fast, before loading or solving, on any output that cannot be written."""
     from arapkit.io import check_figure_format, check_output_path, mesh_format
 
-    inputs = [args.mesh, args.handles, args.transform, args.rings_file]
+    inputs = [args.mesh, args.handles, args.transform, args.rings_file, args.groups]
     outs = []
     if args.output is None and not args.dry_run:
         raise InputError("-o/--output OUT is required (only --dry-run writes no mesh)")
@@ -284,6 +300,7 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
         weld=getattr(args, "weld", None),
         volumetric=args.volumetric,
         interior_density=args.interior_density,
+        groups=args.groups,
         **method,
     )
 
@@ -300,7 +317,7 @@ def run(args: argparse.Namespace) -> int:
     tell = lambda msg: note(worded_for(msg, "cli"), args.quiet)  # noqa: E731
     if args.dry_run:
         inputs = load_job_inputs(job, note=tell)
-        return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings)
+        return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings, inputs.groups)
     if args.volumetric and args.weights != DEFAULT_WEIGHTS:
         from arapkit.methods.volumetric import DEFAULT_VOLUME_WEIGHTS
 
@@ -361,7 +378,7 @@ def run(args: argparse.Namespace) -> int:
 
         print(json.dumps(to_jsonable(report), indent=2))
     else:
-        _print_summary(args, mesh, hs, res, wall)
+        _print_summary(args, mesh, hs, res, wall, prepared.groups)
     return 0
 
 
@@ -398,7 +415,7 @@ def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
     return ", ".join([info.label, *shown])
 
 
-def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
+def _dry_run(args: argparse.Namespace, mesh, hs, rings, groups=None) -> int:
     """Print what the handle file selects and how it moves it; draw it; solve nothing."""
     from arapkit.mesh.orientation import bounding_box
     from arapkit.workflows.jobs import describe_groups, describe_rings
@@ -409,6 +426,12 @@ def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
     print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
     for line in describe_groups(mesh.vertices, hs):
         print(f"  {line}")
+    if groups is not None:
+        print(f"groups: {groups.summary()} from {args.groups}")
+        sizes = groups.sizes
+        for i, name in enumerate(groups.names):
+            kind = "rigid part" if groups.rigid[i] else "shared rotation"
+            print(f"  {name}: {sizes[i]} vertices, {kind}")
     print(f"rings: r = {describe_rings(rings)}; dry run: nothing solved, no mesh written")
     if args.figure:
         from arapkit.plots.figures import groups_figure, save_figure
@@ -425,7 +448,7 @@ def _vec(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
 
 
-def _print_summary(args, mesh, hs, res, wall: float) -> None:
+def _print_summary(args, mesh, hs, res, wall: float, groups=None) -> None:
     lines = [
         f"output: {args.output}",
         f"vertices: {mesh.n_vertices}"
@@ -434,6 +457,7 @@ def _print_summary(args, mesh, hs, res, wall: float) -> None:
            "has the input's vertices)"),
         f"faces: {mesh.n_faces}",
         f"handles: {len(hs.indices)} in {len(hs.groups)} group(s)",
+        *([f"groups: {groups.summary()}"] if groups is not None else []),
         f"method: {args.energy}",
         f"iterations: {res.iterations}",
         f"converged: {'yes' if res.converged else 'no'}",

@@ -36,6 +36,8 @@ The server binds 127.0.0.1 unless --host says otherwise; press Ctrl-C to stop.
 EXAMPLES = [
     "arapkit edit                                  # the built-in bar, ends as handles",
     "arapkit edit examples/cactus.off --handles examples/cactus.json --rings 2",
+    "arapkit edit examples/cactus.off --handles examples/cactus.json --groups "
+    "examples/cactus-groups.json",
     "arapkit edit mesh.off --rings-file rings.txt --export-dir out --port 9000",
     "arapkit edit examples/puppet.png              # the 2D view: pin and warp a sprite",
     "arapkit edit --session out/mesh-session.json  # resume a saved session",
@@ -62,6 +64,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         help="uniform r when no rings file is given (default 1)",
     )
     p.add_argument("--handles", metavar="H", help="handle file (JSON, or .sel with .def)")
+    p.add_argument("--groups", metavar="G",
+                   help="rigid parts and shared-rotation groups to start with (as for "
+                   "arapkit deform --groups; paint more with the tool 'Paint part')")
     from arapkit.cli.common import add_weld_option
 
     add_weld_option(p)
@@ -145,6 +150,11 @@ def build_state(args: argparse.Namespace) -> Any:
         hs = load_handles(args.handles, source.vertices,
                           welded=None if welded is None else st.mesh)
         st.add_handle_set(hs, record=False)
+    if getattr(args, "groups", None):
+        from arapkit.io import load_groups
+
+        st.load_groups(load_groups(args.groups, source.vertices,
+                                   welded=None if welded is None else st.mesh))
     st.clear_history()  # start-up choices are not undoable edits
     return st
 

@@ -36,6 +36,7 @@ import viser
 from arapkit import validate
 from arapkit.editor.files import MESH_SUFFIXES, FileActions, safe_stem
 from arapkit.editor.geometry import UP_AXES, framing_distance, raycast
+from arapkit.editor.groups import GROUP_COLORS, groups_legend_html
 from arapkit.editor.panels import HANDLE_COLOURS, MAX_R, VIEWS, Panels, next_step
 from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, PointerTools
@@ -356,6 +357,9 @@ class EditorApp(Panels, PointerTools, FileActions):
         labels, colors, legend = None, (), ""
         if view == "Rigidity r":
             labels, colors, legend = ring_labels(st.rings), RING_COLORS, rings_legend_html()
+        elif view == "Groups":
+            labels, colors = st.groups.colour_labels(), (SHADED_COLOR, *GROUP_COLORS)
+            legend = groups_legend_html(st.groups)
         elif view == "Energy":
             if self.vertex_energy is None:
                 legend = "<i>energy appears after an r-ring ARAP solve</i>"
@@ -526,7 +530,7 @@ class EditorApp(Panels, PointerTools, FileActions):
             if self._status_ok.startswith("No handles yet"):  # not once a handle is made
                 self.status(f"**{st.settings.label}** · solving ...")
             req = SolveRequest(st.mesh, idx, tgt, st.rings, dataclasses.replace(st.settings),
-                               live=live)
+                               live=live, groups=st.groups.vertex_groups())
             return self.worker.submit(req)
 
     def drag_handle(

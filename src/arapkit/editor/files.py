@@ -102,6 +102,7 @@ class FileActions:
     vertex_energy: np.ndarray | None
     up_mesh: Any
     up_rings: Any
+    up_groups: Any
     up_session: Any
     bt_save: Any
     bt_export: Any
@@ -115,6 +116,7 @@ class FileActions:
         """Bind the upload and export widgets, and guard uploads while they arrive."""
         ui = self.ui
         self.up_rings.on_upload(ui(self._upload_rings))
+        self.up_groups.on_upload(ui(self._upload_groups))
         self.bt_save.on_click(ui(self._save_session))
         self.up_session.on_upload(ui(self._upload_session))
         self.bt_export.on_click(ui(self._export))
@@ -235,6 +237,23 @@ class FileActions:
             self.after_edit()
             return rings
 
+    def load_groups_bytes(self, name: str, data: bytes) -> Any:
+        """Use an uploaded groups file (JSON, an id file or a PLY with ``part``/``group``)
+        as the painted groups; undoable. Returns the groups read."""
+        from arapkit.io import load_groups
+
+        self._check_upload(name, data, "groups files")
+        with self.lock:
+            mesh = self.state.mesh
+            welded = getattr(mesh, "welded_from", None)
+            source = mesh if welded is None else welded.source
+            groups = self._via_tempfile(
+                name, data, lambda p: load_groups(p, source.vertices,
+                                                  welded=None if welded is None else mesh))
+            self.state.load_groups(groups)
+            self.after_edit()
+            return groups
+
     def load_session_bytes(self, name: str, data: bytes) -> None:
         """Apply an uploaded session to the loaded mesh (never opens a path it names)."""
         self._check_upload(name, data, "sessions")
@@ -294,6 +313,11 @@ class FileActions:
         rings = self.load_rings_bytes(f.name, f.content)
         self.notify(event, "Rings loaded", f"{f.name}: r from {rings.min()} to {rings.max()}")
 
+    def _upload_groups(self, event: Any) -> None:
+        f = self.up_groups.value
+        groups = self.load_groups_bytes(f.name, f.content)
+        self.notify(event, "Groups loaded", f"{f.name}: {groups.summary()}")
+
     def _upload_session(self, event: Any) -> None:
         f = self.up_session.value
         self.load_session_bytes(f.name, f.content)
@@ -326,7 +350,8 @@ class FileActions:
             return st.save_session(out / f"{stem}-session.json")
 
     def export(self) -> list[Path]:
-        """Write the deformed mesh (PLY with r and energy per vertex) and the rings file.
+        """Write the deformed mesh (PLY with r and energy per vertex), the rings file and,
+        when groups are painted, the groups file (``--groups`` reads it back).
 
         Everything the mesh's file carried comes along (``save_mesh(like=...)``); a mesh
         loaded from OBJ is also exported as OBJ, which keeps its UVs and materials.
@@ -348,6 +373,16 @@ class FileActions:
             rings = st.rings if welded is None else st.rings[welded.index]
             save_rings(rings_path, rings)
             paths = [mesh_path, rings_path]
+            groups = st.groups.vertex_groups()
+            if groups is not None:  # the painted parts, as a groups file of the input
+                from arapkit.io import save_groups
+                from arapkit.mesh.groups import VertexGroups
+
+                if welded is not None:
+                    groups = VertexGroups(groups.ids[welded.index], groups.names,
+                                          groups.rigid, groups.source)
+                paths.append(out / f"{stem}-groups.json")
+                save_groups(paths[-1], groups)
             attrs = getattr(source, "attributes", None)
             if attrs is not None and attrs.source_format == "obj":
                 obj_path = out / f"{stem}-deformed.obj"

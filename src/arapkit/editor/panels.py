@@ -25,6 +25,7 @@ import viser
 from arapkit import validate
 from arapkit.editor.files import MESH_SUFFIXES
 from arapkit.editor.geometry import UP_AXES
+from arapkit.editor.groups import ERASE
 from arapkit.editor.settings import SolverSettings, solver_choices
 from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, find_tool
@@ -33,7 +34,7 @@ from arapkit.errors import InputError, worded_for
 
 __all__ = ["MAX_R", "VIEWS", "Panels", "handle_controls", "next_step"]
 
-VIEWS = ("Shaded", "Rigidity r", "Energy")
+VIEWS = ("Shaded", "Rigidity r", "Energy", "Groups")
 #: the largest r the sliders offer: the library's one rule for r
 MAX_R = validate.MAX_RINGS
 _FIRST_TOOL = "Select"
@@ -238,6 +239,14 @@ class Panels:
             self.sl_paint = gui.add_slider("Paint r", 1, MAX_R, 1, 3, marks=marks,
                                            hint=f"r the brush and the fill paint: {rule}")
             self.up_rings = gui.add_upload_button("Load rings file", icon=viser.Icon.UPLOAD)
+        with gui.add_folder("Groups"):
+            gui.add_markdown("Rigid parts move as one piece; a shared-rotation group turns "
+                             "as one (libigl's G). Paint them with the tool *Paint part*.")
+            self.dd_group = gui.add_dropdown("Group", (ERASE,), initial_value=ERASE)
+            self.bt_new_part = gui.add_button("New rigid part", icon=viser.Icon.PLUS)
+            self.bt_new_shared = gui.add_button("New shared-rotation group")
+            self.bt_remove_group = gui.add_button("Remove group", color="red")
+            self.up_groups = gui.add_upload_button("Load groups file", icon=viser.Icon.UPLOAD)
         with gui.add_folder("View"):
             self.dd_view = gui.add_dropdown("Colour", VIEWS, initial_value="Shaded")
             self.dd_up = gui.add_dropdown("Up axis", tuple(UP_AXES), initial_value="+z")
@@ -340,6 +349,9 @@ class Panels:
                   self.cb_dynamics):
             w.on_update(ui(lambda e: self._apply_settings()))
         self.bt_solve.on_click(ui(lambda e: self.request_solve()))
+        self.bt_new_part.on_click(ui(lambda e: self._new_group(rigid=True)))
+        self.bt_new_shared.on_click(ui(lambda e: self._new_group(rigid=False)))
+        self.bt_remove_group.on_click(ui(lambda e: self._remove_group()))
         self.bt_undo.on_click(ui(lambda e: self._history(self.state.undo)))
         self.bt_redo.on_click(ui(lambda e: self._history(self.state.redo)))
 
@@ -368,6 +380,20 @@ class Panels:
         self.nb_budget.value = s.live_budget_ms
         self.cb_dynamics.value = s.dynamics
         self.sync_handle_widgets()
+        self.sync_group_widgets()
+
+    def sync_group_widgets(self, choose: int | None = None) -> None:
+        """Show the painted groups in the group selector (keeping the chosen one, or
+        choosing group ``choose``)."""
+        g = self.state.groups
+        labels = (ERASE, *(g.label(k) for k in range(g.n_groups)))
+        keep = self.dd_group.value if self.dd_group.value in labels else ERASE
+        self.dd_group.options = labels
+        self.dd_group.value = labels[choose + 1] if choose is not None else keep
+
+    def current_group(self) -> int:
+        """The group the *Paint part* tool paints (-1: the eraser)."""
+        return self.state.groups.index_of(self.dd_group.value)
 
     def sync_handle_widgets(self) -> None:
         """Show the active handle (the last one when it is gone) in the handle widgets."""
@@ -542,6 +568,18 @@ class Panels:
         """The user picked an up axis in the panel: it holds until the next mesh loads."""
         self.up_reason = "chosen in the panel"
         self.aim_cameras()
+
+    def _new_group(self, rigid: bool) -> None:
+        g = self.state.new_group(rigid)
+        self.quietly(lambda: self.sync_group_widgets(choose=g))
+        self.sync_history()
+
+    def _remove_group(self) -> None:
+        g = self.current_group()
+        if g < 0:
+            raise InputError("remove group: choose a group first")
+        self.state.remove_group(g)
+        self.after_edit()
 
     def _history(self, step: Callable[[], bool]) -> None:
         st = self.state

@@ -49,6 +49,7 @@ from arapkit.editor.geometry import (  # raycast, quat_to_matrix: kept at their 
     vertex_normals,
     vertices_within,
 )
+from arapkit.editor.groups import PaintedGroups
 from arapkit.editor.handles import Handle
 from arapkit.editor.session import SESSION_FORMAT, SESSION_VERSION
 from arapkit.editor.settings import METHODS, SolverSettings
@@ -66,6 +67,7 @@ MAX_UNDO = 200
 class _Snapshot:
     handles: tuple[Handle, ...]
     rings: np.ndarray
+    groups: PaintedGroups | None = None
 
 
 # --------------------------------------------------------------------------- editor state
@@ -93,6 +95,8 @@ class EditorState:
         self.mesh_path = None if mesh_path is None else str(mesh_path)
         self.vertices = np.array(mesh.vertices, dtype=np.float64)
         self.rings = self.check_rings(rings)
+        #: painted rigid parts and shared-rotation groups (never changed in place)
+        self.groups = PaintedGroups.empty(self.n)
         self.handles: list[Handle] = []
         self.selection = np.zeros(0, dtype=np.int64)
         self.settings = SolverSettings()
@@ -117,11 +121,12 @@ class EditorState:
 
     # ---------------------------------------------------------------- undo / redo
     def _snapshot(self) -> _Snapshot:
-        return _Snapshot(tuple(h.copy() for h in self.handles), self.rings)
+        return _Snapshot(tuple(h.copy() for h in self.handles), self.rings, self.groups)
 
     def _restore(self, snap: _Snapshot) -> None:
         self.handles = [h.copy() for h in snap.handles]
         self.rings = snap.rings
+        self.groups = snap.groups
 
     def checkpoint(self) -> None:
         """Record the current handles and rings as one undo step (drops the redo list)."""
@@ -404,6 +409,53 @@ class EditorState:
         self.rings = new
         return changed
 
+    # ---------------------------------------------------------------- groups
+    def new_group(self, rigid: bool, name: str | None = None) -> int:
+        """Add an empty group (a rigid part, or a shared-rotation group); its index."""
+        groups, g = self.groups.with_group(rigid, name)
+        self.checkpoint()
+        self.groups = groups
+        return g
+
+    def paint_group(self, point: np.ndarray, radius: float, g: int,
+                    record: bool = True) -> int:
+        """Part brush: put the vertices within ``radius`` of ``point`` in group ``g`` (-1:
+        in none). Returns the number of vertices that changed group; ``record=False`` for
+        the dabs after a stroke's first.
+
+        Examples
+        --------
+        >>> from arapkit.mesh.shapes import bar
+        >>> st = EditorState(bar())
+        >>> g = st.new_group(rigid=True)
+        >>> st.paint_group(st.vertices[0], 0.2, g) > 0, st.groups.vertex_groups().names
+        (True, ('part 1',))
+        """
+        idx = self.vertices_near(point, radius)
+        if idx.size == 0:
+            idx = np.array([self.nearest_vertex(point)])
+        changed = int(np.count_nonzero(self.groups.ids[idx] != g))
+        if changed:
+            new = self.groups.painted(idx, g)  # checked before the undo step
+            if record:
+                self.checkpoint()
+            self.groups = new
+        return changed
+
+    def remove_group(self, g: int) -> None:
+        """Delete group ``g``; its vertices are in no group."""
+        new = self.groups.without(g)
+        self.checkpoint()
+        self.groups = new
+
+    def load_groups(self, groups: Any) -> None:
+        """Replace the painted groups by a :class:`~arapkit.mesh.groups.VertexGroups`."""
+        if groups.n_vertices != self.n:
+            raise InputError(f"{groups.source}: groups of {groups.n_vertices} vertices for a "
+                             f"mesh of {self.n}")
+        self.checkpoint()
+        self.groups = PaintedGroups.of(groups)
+
     # ---------------------------------------------------------------- sessions
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready session: mesh path, handles (with targets), rings, solver settings."""
@@ -418,6 +470,7 @@ class EditorState:
             "handle_indices": idx.tolist(),
             "targets": tgt.tolist(),
             "rings": self.rings.tolist(),
+            "groups": self.groups.to_json(),
             "solver": self.settings.to_dict(),
             # a session on a welded mesh indexes the welded vertices: reopening welds again
             "weld": (None if getattr(self.mesh, "welded_from", None) is None
@@ -442,10 +495,13 @@ class EditorState:
         if np.unique(all_idx).size != all_idx.size:
             raise InputError("session: a vertex belongs to two handles")
         rings = self.check_rings(d["rings"], "session rings") if "rings" in d else self.rings
+        groups = (PaintedGroups.from_json(d["groups"], self.n) if "groups" in d
+                  else PaintedGroups.empty(self.n))
         settings = SolverSettings.from_dict(d.get("solver", {}))
         if record:
             self.checkpoint()
         self.handles, self.rings, self.settings = handles, rings, settings
+        self.groups = groups
 
     def save_session(self, path: str | os.PathLike[str]) -> Path:
         """Write the session as JSON (atomically: a crash never leaves half a file)."""

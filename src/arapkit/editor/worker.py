@@ -93,6 +93,9 @@ class SolveRequest:
     init: np.ndarray | None = None  # start shape; default: the worker's last shape
     #: a drag in progress: a large mesh's proxy preview is enough (the release is not live)
     live: bool = False
+    #: painted rigid parts and shared-rotation groups (a VertexGroups; None for none), read
+    #: by the methods that take them (the registry's ``MethodInfo.groups``)
+    groups: Any = None
     t_submit: float = dataclasses.field(default_factory=time.perf_counter)
     seq: int = 0
 
@@ -133,17 +136,28 @@ class SolveUpdate:
     building: tuple[float, float, str] | None = None
 
 
-def _coarse_to_fine(mesh: Any, s: SolverSettings) -> bool:
+def _coarse_to_fine(mesh: Any, s: SolverSettings, groups: Any = None) -> bool:
     """Whether ``mesh`` is solved coarse to fine with these settings (by size unless they
-    say; never a volume, whose tet graph has no surface to decimate)."""
-    return not s.volumetric and coarse_to_fine(mesh, s.multires, {"energy": s.method})
+    say; never a volume, whose tet graph has no surface to decimate, nor with groups,
+    which have no proxy)."""
+    return not s.volumetric and coarse_to_fine(mesh, s.multires,
+                                               {"energy": s.method, "groups": groups})
+
+
+def _groups_for(req: SolveRequest) -> Any:
+    """The request's groups where its method reads them (surface methods with the
+    registry's ``groups`` capability), else None: as a painted r is for one without a
+    rigidity map, the painting is kept and ignored."""
+    s = req.settings
+    return req.groups if s.info.groups and not s.volumetric else None
 
 
 def _build(req: SolveRequest, rings: Any, s: SolverSettings) -> Any:
     """The deformer the settings ask for: coarse to fine, volumetric or plain."""
     from arapkit import Deformer
 
-    if _coarse_to_fine(req.mesh, s):
+    groups = _groups_for(req)
+    if _coarse_to_fine(req.mesh, s, groups):
         # the proxy previews at once; the full factor is built in the background once the
         # first preview is out (started earlier, it competes with that preview)
         return MultiresDeformer(req.mesh, req.handles, rings, s.weights, energy=s.method,
@@ -151,7 +165,8 @@ def _build(req: SolveRequest, rings: Any, s: SolverSettings) -> Any:
     # chosen above: not again by size
     return Deformer(req.mesh, req.handles, rings=rings, energy=s.method, weights=s.weights,
                     tol=s.tol, max_iter=s.max_iter, multires=False,
-                    **({"volumetric": True} if s.volumetric else {}))
+                    **({"volumetric": True} if s.volumetric else {}),
+                    **({} if groups is None else {"groups": groups}))
 
 
 class _Engine:
@@ -170,8 +185,11 @@ class _Engine:
         info = s.info
         # only a method with a rigidity map reads the painted one; the others ignore it
         rings = req.rings if info.rigidity_map else 1
-        # a volumetric deformer tetrahedralises once per mesh: kept while handles and r change
-        key = (id(req.mesh), s.weights, s.method, s.volumetric, s.multires)
+        # a volumetric deformer tetrahedralises once per mesh: kept while handles and r change;
+        # a large mesh with groups is solved at full resolution, without them coarse to fine
+        groups = _groups_for(req)
+        key = (id(req.mesh), s.weights, s.method, s.volumetric, s.multires,
+               _coarse_to_fine(req.mesh, s, groups))
         if self.deformer is None or self._key != key:
             self.deformer = _build(req, rings, s)
             self._key = key
@@ -182,6 +200,8 @@ class _Engine:
             d.set_rings(req.rings)
         if not np.array_equal(d.handles, req.handles):
             d.set_handles(req.handles)
+        if not _same_groups(getattr(d, "groups", None), groups):
+            d.set_groups(groups)
         return d
 
     def laplacian_editor(self, req: SolveRequest) -> Any:
@@ -562,6 +582,14 @@ class SolveWorker:
 _ONE_SHOT: dict[str, Callable[[SolveWorker, SolveRequest, float], None]] = {
     "laplacian": SolveWorker._solve_laplacian,
 }
+
+
+def _same_groups(a: Any, b: Any) -> bool:
+    """Whether two VertexGroups (or None) are the same groups."""
+    if a is None or b is None:
+        return a is b
+    return (a.names == b.names and np.array_equal(a.rigid, b.rigid)
+            and np.array_equal(a.ids, b.ids))
 
 
 def _energy_unit(deformer: Any) -> float:

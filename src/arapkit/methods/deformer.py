@@ -55,6 +55,7 @@ from .dispatch import (
     register_variant,
     variant,
 )
+from .grouping import backend_for, grouped_problem, refuse_groups, ungrouped
 from .planar import PlanarSolver, in_plane, planar_start, planar_targets, rings_or_preset, solve_dim
 from .registry import method
 
@@ -129,6 +130,15 @@ class Deformer:
         (``r s < 1``) it blends in a rotation per triangle
         (:mod:`arapkit.arap.energies.rring`). Coarse to fine sets it for its proxy.
         ``energy="rring"`` only; the CPU device only below 1.
+    groups : VertexGroups or (n,) int, optional
+        Vertex groups (:class:`arapkit.mesh.groups.VertexGroups`, e.g. from
+        :func:`arapkit.io.load_groups`): **rigid parts**, whose vertices move by one rigid
+        motion (solved exactly: a handle inside one moves the whole part), and
+        **shared-rotation groups**, libigl's ``ARAPData.G`` (one rotation, free positions).
+        A plain array is libigl's ``G``: one id per vertex, shared rotations, -1 for none.
+        For the methods the registry says take them (``MethodInfo.groups``: r-ring and
+        spokes-and-rims ARAP); they mix with a rigidity map and with handles. See
+        ``docs/groups.md``.
     tol : float
         Stop when ``|E_{t-1} - E_t| / |E_{t-1}| < tol`` (the paper's test, gamma = 1e-3).
     max_iter : int
@@ -194,6 +204,17 @@ class Deformer:
     >>> fast = Deformer(mesh, h, rings=2, accelerate=True).solve(t, tol=1e-6)
     >>> bool(fast.energy <= res.energy)
     True
+
+    A rigid part in the middle of the bar keeps its shape while the rest bends:
+
+    >>> from arapkit.mesh.groups import VertexGroups
+    >>> middle = np.flatnonzero(np.abs(mesh.vertices[:, 0] - 4) < 1)
+    >>> part = VertexGroups.from_lists([("middle", middle, True)], mesh.n_vertices)
+    >>> bent = Deformer(mesh, h, groups=part).solve(t).vertices
+    >>> i, j = middle[0], middle[-1]
+    >>> d0, d1 = (np.linalg.norm(X[i] - X[j]) for X in (mesh.vertices, bent))
+    >>> bool(abs(d1 - d0) < 1e-9 * d0)
+    True
     """
 
     def __new__(cls, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
@@ -222,6 +243,9 @@ class Deformer:
         if multires:
             raise InputError("multires=True is for surfaces; volumetric=True solves the "
                              "volume directly")
+        if options.get("groups") is not None:
+            raise InputError("groups: vertex groups are for surface ARAP, not "
+                             "volumetric=True (the volume's interior vertices have none)")
         energy = options.pop("energy", "rring")
         check_method(energy, options.pop("sr_alpha", None), options.pop("nodes", None),
                      options.pop("sr_roi", None), options.pop("smooth_lambda", None))
@@ -250,6 +274,7 @@ class Deformer:
         nodes: int | None = None,
         smooth_lambda: float | None = None,
         ring_scale: float = 1.0,
+        groups=None,
         tol: float = 1e-3,
         max_iter: int = 1000,
         init: str = "identity",
@@ -297,21 +322,57 @@ class Deformer:
 
             if not np.all(np.asarray(rings) == 1):
                 raise InputError(f"energy '{energy}' has no rigidity map (rings must be 1)")
+            if groups is not None:
+                refuse_groups(energy)
+            self.groups = None
             self.embedded = EmbeddedDeformation(mesh, handles, options["nodes"])
             self.problem = None
             self._rings = np.ones(mesh.n_vertices, dtype=np.int32)
             self._weight_notes = []
             return
+        #: the vertex groups in use (None: none)
+        self.groups = None
         self.problem = ARAPProblem.from_mesh(
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
             reorder=reorder, dim=self.dim, **options)
         self._rings = self.problem.energy.rings[self.problem.iperm]
         if sr_roi is not None:
             _check_outside_roi_is_held(mesh, sr_roi, handles)
-        self.backend = make_backend(self.problem, self.device)
+        if groups is not None:
+            self.problem, self.groups = grouped_problem(self.problem, groups, energy,
+                                                        self.device)
+        self.backend = backend_for(self.problem, self.device)
         self._weight_notes = self._check_rest_is_minimum()
 
     # -- configuration (lazy refactorisation, as CGAL) -----------------------------
+    def set_groups(self, groups) -> None:
+        """Use other vertex groups (a :class:`~arapkit.mesh.groups.VertexGroups`, one
+        shared-rotation id per vertex, or None for none); refactorises at the next solve.
+
+        Examples
+        --------
+        >>> from arapkit.mesh.groups import VertexGroups
+        >>> from arapkit.mesh.shapes import bar
+        >>> m = bar()
+        >>> d = Deformer(m, [0])
+        >>> d.set_groups(VertexGroups.from_lists([("tip", [1, 2, 3], True)], m.n_vertices))
+        >>> d.groups.names
+        ('tip',)
+        """
+        if self.problem is None:
+            if groups is not None:
+                refuse_groups(self.energy)
+            return
+        p = self.problem
+        plain, kept = ungrouped(p), None
+        new = plain
+        if groups is not None:  # checked first: a refusal keeps what is there
+            new, kept = grouped_problem(plain, groups, self.energy, self.device)
+        self.groups = kept
+        p.release_factor()
+        self.problem = new
+        self.backend = backend_for(self.problem, self.device)
+
     def set_handles(self, handles, *, update_factor: bool | None = None) -> None:
         """Use a new handle set; the factorisation is redone at the next solve, or, with
         ``update_factor`` (None: in 2D), corrected (:mod:`arapkit.arap.pinupdate`)."""
@@ -338,7 +399,7 @@ class Deformer:
         r = check_rings(rings_or_preset(rings), p.n_vertices)  # a bad map: the factor is kept
         p.release_factor()  # of no use to the new map, and as large as the one to come
         self.problem = p.with_rings(r)
-        self.backend = make_backend(self.problem, self.device)
+        self.backend = backend_for(self.problem, self.device)
         self._rings = self.problem.energy.rings[self.problem.iperm]
         self._weight_notes = self._check_rest_is_minimum()
 
@@ -439,7 +500,7 @@ class Deformer:
             return
         if self.backend.problem is not self.problem or not self.problem.factorised:
             if self.backend.problem.energy is not self.problem.energy:
-                self.backend = make_backend(self.problem, self.device)
+                self.backend = backend_for(self.problem, self.device)
             was = self.problem.factorised
             self.backend.bind(self.problem)
             if not was and self.problem.elimination.factor is not None:

@@ -49,9 +49,9 @@ def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
     return MethodInfo(name, label, local_global=True, **(facts | kw))
 
 
-register(_local_global_method("rring", "r-ring ARAP", volumetric=True))
+register(_local_global_method("rring", "r-ring ARAP", volumetric=True, groups=True))
 # compare runs the paper's comparison set, which has no spokes-and-rims
-register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP",
+register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP", groups=True,
                               interfaces=frozenset(INTERFACES) - {"compare"}))
 register(_local_global_method(
     "sr-arap", "SR-ARAP",
@@ -143,12 +143,16 @@ def coarse_to_fine(mesh: Mesh, multires: bool | None, options: dict) -> bool:
         return False  # Deformer itself says which names there are
     info = method(energy)
     if multires is None:
+        # vertex groups have no proxy yet: a mesh with them is solved at full resolution
         return (info.multires and mesh.n_vertices >= MULTIRES_AUTO_VERTICES
                 and options.get("init", "identity") == "identity"
-                and options.get("sr_roi") is None)
+                and options.get("sr_roi") is None and options.get("groups") is None)
     if multires and not info.multires:
         raise InputError(f"multires=True: energy '{info.name}' cannot be solved coarse to "
                          "fine (a local/global descent method can)")
+    if multires and options.get("groups") is not None:
+        raise InputError("multires=True: vertex groups are solved at full resolution only "
+                         "(use multires=False)")
     return bool(multires)
 
 

@@ -84,6 +84,10 @@ class MethodInfo:
     planar : bool
         Runs in the plane on a planar shape (2 x 2 rotations, no folded triangles:
         :mod:`arapkit.methods.planar`); a method without it solves planar shapes in 3D.
+    groups : bool
+        Takes vertex groups (``groups=``): shared-rotation groups and rigid parts
+        (:mod:`arapkit.arap.grouped`): a local/global method with one rotation per vertex
+        and no coupling between rotations.
     handle_tol : float
         How far a handle may end from its target, relative to the bounding-box diagonal:
         0 for hard constraints (eliminated, met to round-off), the soft constraints'
@@ -106,6 +110,7 @@ class MethodInfo:
     volumetric: bool = False
     multires: bool = False
     planar: bool = False
+    groups: bool = False
     handle_tol: float = 0.0
     options: dict[str, MethodOption] = field(default_factory=dict, hash=False)
     interfaces: frozenset[str] = field(default_factory=lambda: frozenset(INTERFACES))

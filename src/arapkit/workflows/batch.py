@@ -144,6 +144,8 @@ def _deform_command(job: dict, output: str) -> list[str]:
             cmd.append(f"{flag}={job[key]}")
     if job["accelerate"] is not None:  # None: the method's choice, as deform's default
         cmd.append("--accelerate" if job["accelerate"] else "--no-accelerate")
+    if job.get("groups") is not None:  # inline groups: the report's vertex_groups
+        cmd += ["--groups", job["groups"] if isinstance(job["groups"], str) else "GROUPS.json"]
     return [*cmd, "-o", output]
 
 

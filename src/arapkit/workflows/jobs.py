@@ -92,6 +92,9 @@ class DeformJob:
     volumetric, interior_density
         Volumetric ARAP (:class:`arapkit.methods.volumetric.VolumetricDeformer`) and its interior
         density.
+    groups : str, list, dict or None
+        A groups file (rigid parts and shared-rotation groups, :func:`arapkit.io.load_groups`)
+        or its JSON entries already parsed; None for none.
     """
 
     mesh: str
@@ -111,10 +114,13 @@ class DeformJob:
     weld: float | None = None
     volumetric: bool = False
     interior_density: float | None = None
+    groups: str | list | dict | None = None
 
     def input_files(self) -> list[str]:
         """The files this job reads."""
         files = [self.mesh, self.transform, self.rings_file]
+        if isinstance(self.groups, (str, os.PathLike)):
+            files.append(self.groups)
         if isinstance(self.handles, (str, os.PathLike)):
             files.append(self.handles)
             if self.transform is None and os.fspath(self.handles).lower().endswith(".sel"):
@@ -137,6 +143,8 @@ class PreparedJob:
     handles: Any
     deformer: Any
     notes: list[str] = field(default_factory=list)
+    #: the vertex groups solved with (None for none)
+    groups: Any = None
 
     @property
     def rings(self) -> np.ndarray:
@@ -171,6 +179,8 @@ class JobInputs:
     notes: list[str] = field(default_factory=list)
     #: records a further note (e.g. the deformer's) like the loader's
     tell: Callable[[str], None] | None = field(default=None, repr=False)
+    #: the job's vertex groups on ``mesh`` (None for none)
+    groups: Any = None
 
 
 def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -> JobInputs:
@@ -222,7 +232,19 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
             rings = weld_values(mesh, np.asarray(rings))
     else:
         rings = int(job.rings)
-    return JobInputs(source, mesh, hs, rings, notes, tell)
+    return JobInputs(source, mesh, hs, rings, notes, tell, _load_groups(job, source, mesh))
+
+
+def _load_groups(job: DeformJob, source: Any, mesh: Any):
+    """The job's vertex groups on ``mesh`` (None without), read like its handles."""
+    if job.groups is None:
+        return None
+    from ..io import load_groups, parse_groups
+
+    welded = None if mesh is source else mesh
+    if isinstance(job.groups, (str, os.PathLike)):
+        return load_groups(job.groups, source.vertices, welded=welded)
+    return parse_groups(job.groups, source.vertices, source="<groups>", welded=welded)
 
 
 def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> PreparedJob:
@@ -255,10 +277,12 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
         nodes=job.nodes,
         smooth_lambda=job.smooth_lambda,
         **({"volumetric": True, "density": job.interior_density} if job.volumetric else {}),
+        **({} if inputs.groups is None else {"groups": inputs.groups}),
     )
     for msg in deformer.notes:
         inputs.tell(msg)
-    return PreparedJob(job, inputs.mesh, inputs.handles, deformer, inputs.notes)
+    return PreparedJob(job, inputs.mesh, inputs.handles, deformer, inputs.notes,
+                       inputs.groups)
 
 
 def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[str]:
@@ -355,6 +379,7 @@ def job_report(
                 {"name": g.name, "count": len(g.indices), "kind": g.kind} for g in hs.groups
             ],
         },
+        **_groups_report(job, prepared),
         "result": {
             "iterations": res.iterations,
             "converged": res.converged,
@@ -372,6 +397,22 @@ def job_report(
         "timings": {**res.timings, "wall_s": wall_s},
         "outputs": dict(outputs or {}),
     }
+
+
+def _groups_report(job: DeformJob, prepared: PreparedJob) -> dict[str, Any]:
+    """The report's ``vertex_groups`` section (none without groups): each part or group,
+    its size and kind, and for rigid parts how far their edges moved from their rest length
+    (0 to round-off: the parts are solved exactly)."""
+    g = prepared.groups
+    if g is None:
+        return {}
+    sizes = g.sizes
+    return {"vertex_groups": {
+        "file": job.groups if isinstance(job.groups, str) else "<groups>",
+        "summary": g.summary(),
+        "groups": [{"name": name, "count": int(sizes[i]), "rigid": bool(g.rigid[i])}
+                   for i, name in enumerate(g.names)],
+    }}
 
 
 def describe_groups(vertices: np.ndarray, hs) -> list[str]:

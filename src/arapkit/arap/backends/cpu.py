@@ -278,6 +278,7 @@ class CPUBackend:
         self.nonneg = bool((problem.w >= 0).all())
         self._make_chunks(nbh, en.n_owners)
         self.slot = _NO_INT
+        self._all: tuple[np.ndarray, np.ndarray] | None = None  # for vertex_rhs
 
     def bind(self, problem: ARAPProblem, elimination=None) -> CPUBackend:
         """Use ``problem`` (same energy, possibly other handles); factorises if needed.
@@ -346,6 +347,16 @@ class CPUBackend:
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> np.ndarray:
         """Global step: ``A_ff^{-1} rhs``."""
         return self.problem.elimination.solve(rhs, out)
+
+    def vertex_rhs(self, out: np.ndarray) -> np.ndarray:
+        """``b_v = sum_k R_k c_kv`` of every vertex from the last local step, into ``out``
+        (n, 3): rigid parts (:mod:`arapkit.arap.parts`) read their vertices' share."""
+        n = len(out)
+        if self._all is None or len(self._all[0]) != n:
+            self._all = (np.arange(n, dtype=np.int64), np.zeros((n, 3)))
+        gather_rhs(self.buf, self.win_lo, self.win_off, self.chunk_ptr, self.cover_ptr,
+                   self.cover_idx, self._all[0], self._all[1], out)
+        return out
 
     @staticmethod
     def scatter(X: np.ndarray, idx: np.ndarray, P: np.ndarray) -> None:
