@@ -137,6 +137,9 @@ class EditorState:
     def _is_current(self, snap: _Snapshot) -> bool:
         """``snap`` is what the state already is: going back to it would change nothing."""
         return ((snap.rings is self.rings or np.array_equal(snap.rings, self.rings))
+                and (snap.groups is self.groups
+                     or (snap.groups.specs == self.groups.specs
+                         and np.array_equal(snap.groups.ids, self.groups.ids)))
                 and len(snap.handles) == len(self.handles)
                 and all(a.same_as(b) for a, b in zip(snap.handles, self.handles,
                                                       strict=True)))

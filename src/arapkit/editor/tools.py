@@ -149,10 +149,11 @@ TOOLS: tuple[Tool, ...] = (
          click=_select, rectangle=True, aliases=("Select: click", "Select: rectangle")),
     Tool("brush", "Paint brush",
          "Click or Shift+drag paints **Paint r** on the vertices within the radius.",
-         click=_paint, paints=True, brush=True, dab=_dab_r, stroke_rgb=_r_rgb),
+         click=_paint, paints=True, brush=True, dab=_dab_r, stroke_rgb=_r_rgb,
+         view="Rigidity r"),
     Tool("fill", "Flood fill",
          "Click fills the connected region of equal r with **Paint r**.",
-         click=_fill, paints=True),
+         click=_fill, paints=True, view="Rigidity r"),
     Tool("part", "Paint part",
          "Click or Shift+drag puts the vertices within the radius in the **Group** chosen "
          "in *Groups*; the group *(erase)* takes them out. A rigid part moves as one "
