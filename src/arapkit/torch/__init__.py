@@ -8,6 +8,9 @@ Needs the optional extra ``pip install 'arapkit[torch]'``.
   converged solution, not unrolled iterations (:mod:`arapkit.torch.layer`).
 * :func:`arap_energy`: eq. 1 of Chen et al. 2017 with optimal rotations, differentiable in
   the positions: the drop-in "ARAP loss" on a mesh (:mod:`arapkit.torch.energy`).
+* :class:`GraphARAPLoss` and :func:`graph_arap_energy`: the ARAP loss on a point set with a
+  kNN or given graph, r-rings and per-point r, batched, in O(n k) memory, with rotations
+  detached or differentiated (:mod:`arapkit.torch.graph_loss`).
 
 What is differentiated: the handle *targets* (the layer) or the positions (the energies).
 Held fixed: the rest shape, the edge weights, the rigidity map r, the handle set and the
@@ -19,6 +22,7 @@ Details and examples: ``docs/torch.md``.
 from __future__ import annotations
 
 from .energy import arap_energy
+from .graph_loss import GraphARAPLoss, graph_arap_energy
 from .layer import ARAPLayer
 
-__all__ = ["ARAPLayer", "arap_energy"]
+__all__ = ["ARAPLayer", "GraphARAPLoss", "arap_energy", "graph_arap_energy"]
