@@ -65,6 +65,7 @@ def test_equals_the_engine_energy_on_a_knn_graph(rings, cfg):
     ref, R = _engine(P, loss.edges, loss.edge_weights, r, X)
     assert ref > 1.0  # a real deformation, not round-off
     assert abs(E - ref) <= 1e-10 * ref
+    assert loss.last_rotations.shape == R.shape
     assert torch.allclose(loss.last_rotations, torch.tensor(R), atol=1e-9)
 
 

@@ -203,11 +203,13 @@ class GraphARAPLoss(_torch.nn.Module):
             self.register_buffer(key, _torch.from_numpy(np.ascontiguousarray(value)),
                                  persistent=False)
         self._rotations: _torch.Tensor | tuple | None = None
+        self._batched = False  # whether the last call's X was a batch
         self._scratch: dict[int, np.ndarray] = {}  # per thread: calls may run concurrently
 
     @property
     def last_rotations(self) -> _torch.Tensor | None:
-        """The rotations ``R_k`` of the last call, ``(B, n, 3, 3)`` (fitted or given)."""
+        """The rotations ``R_k`` of the last call (fitted or given): ``(n, 3, 3)``, or
+        ``(B, n, 3, 3)`` after a batch."""
         if isinstance(self._rotations, tuple):  # the kernels' (internal order, float64)
             Rs, dtype = self._rotations
             B, n = Rs.shape[:2]
@@ -215,11 +217,12 @@ class GraphARAPLoss(_torch.nn.Module):
             for b in range(B):
                 gather_rows(Rs[b].reshape(n, 9), self.iperm_np, out[b])
             self._rotations = _torch.from_numpy(out.reshape(B, n, 3, 3)).to(dtype)
-        return self._rotations
+        R = self._rotations
+        return R if R is None or self._batched else R[0]
 
     def keep_rotations(self, R, dtype: _torch.dtype | None = None) -> None:
-        """Record the rotations of this call: a tensor in the caller's order, or the
-        kernels' float64 array in the internal order (converted when asked for)."""
+        """Record the rotations ``(B, n, 3, 3)`` of this call: a tensor in the caller's
+        order, or the kernels' float64 array in the internal order (converted when asked)."""
         self._rotations = R if dtype is None else (R, dtype)
 
     def scratch(self) -> np.ndarray:
@@ -275,6 +278,7 @@ class GraphARAPLoss(_torch.nn.Module):
         """
         name = type(self).__name__
         Xb, batched = self._check_X(X, name)
+        self._batched = batched
         P = self._rest_for(rest, Xb, name)
         Rb = None if R is None else self._check_R(R, Xb, name)
         if Rb is None and self.penalty == "norm" and self.rotations == "detached":
