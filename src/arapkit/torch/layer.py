@@ -252,9 +252,9 @@ class ARAPLayer(_torch.nn.Module):
         super().__init__()
         check_dtype(dtype)
         _check_layer_energy(energy)
-        from .mesh.planar import PlanarInput
-        from .methods.planar import solve_dim
-        from .methods.registry import method
+        from ..mesh.planar import PlanarInput
+        from ..methods.planar import solve_dim
+        from ..methods.registry import method
 
         shape = PlanarInput.of(mesh)
         #: solved in the plane (turns about z only); ``given_dim``: the caller's columns
@@ -270,7 +270,7 @@ class ARAPLayer(_torch.nn.Module):
                                  "takes none (pass dim=3 to solve the shape in 3D)")
             problem = _with_groups(problem, energy, groups, device)
             if getattr(problem, "layout", None) is not None:
-                from .arap.backends.torch_parts import PartsAdjoint
+                from ..arap.backends.torch_parts import PartsAdjoint
 
                 self._parts = PartsAdjoint(problem)
         self.problem = problem
@@ -370,8 +370,8 @@ class ARAPLayer(_torch.nn.Module):
 
 def _with_groups(problem: ARAPProblem, energy: str, groups, device):
     """``problem`` with the layer's groups (refused where the method or device cannot)."""
-    from .arap.grouped import as_groups, with_groups
-    from .methods.registry import method, method_names
+    from ..arap.grouped import as_groups, with_groups
+    from ..methods.registry import method, method_names
 
     if not method(energy).groups:
         takes = ", ".join(m for m in method_names("torch") if method(m).groups)
@@ -393,9 +393,9 @@ class _PartsSolve(_torch.autograd.Function):
     def forward(ctx, T, layer: ARAPLayer):
         import numpy as np
 
-        from .arap.backends.cpu import CPUBackend
-        from .arap.grouped import GroupedBackend
-        from .arap.loop import local_global
+        from ..arap.backends.cpu import CPUBackend
+        from ..arap.grouped import GroupedBackend
+        from ..arap.loop import local_global
 
         p = layer.problem
         s = p.scale
