@@ -44,6 +44,7 @@ from .learn.fit import LearnedRings, learn_rings
 from .mesh.model import Mesh
 from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .methods.deformer import Deformer, Result
+from .methods.fit import FitResult, Fitter, fit
 from .methods.laplacian import LaplacianEditor, laplacian_edit
 
 
@@ -65,6 +66,8 @@ del _installed_version
 __all__ = [
     "BoundingBox",
     "Deformer",
+    "FitResult",
+    "Fitter",
     "HandleGroup",
     "HandleSet",
     "InputError",
@@ -75,6 +78,7 @@ __all__ = [
     "UpGuess",
     "__version__",
     "bounding_box",
+    "fit",
     "guess_up",
     "laplacian_edit",
     "learn_rings",

@@ -39,6 +39,7 @@ COMMANDS: list[tuple[str, str]] = [
     ("learn", "arapkit.cli.learn"),
     ("edit", "arapkit.cli.edit"),
     ("batch", "arapkit.cli.batch"),
+    ("fit", "arapkit.cli.fit"),
 ]
 
 _EPILOG = """examples (from a clone of the repository, which ships examples/):
