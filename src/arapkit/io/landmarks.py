@@ -18,6 +18,7 @@ arapkit.errors.InputError: landmarks: landmark 0 is vertex 12, out of range (the
 
 from __future__ import annotations
 
+import json
 import os
 from collections.abc import Mapping
 
@@ -25,7 +26,7 @@ import numpy as np
 
 from ..errors import InputError
 from ..validate import parse_json, read_input, real_array
-from .atomic import write_json
+from .atomic import atomic_write
 
 __all__ = ["load_landmarks", "parse_landmarks", "save_landmarks"]
 
@@ -110,5 +111,7 @@ def save_landmarks(path: str | os.PathLike, vertices, targets) -> None:
     [3]
     """
     v, t = parse_landmarks((np.asarray(vertices), np.asarray(targets)), 1 << 62, str(path))
-    write_json(path, [{"vertex": int(i), "target": [float(c) for c in x]}
-                      for i, x in zip(v, t)])
+    # one landmark a line: a file people read and edit
+    rows = [json.dumps({"vertex": int(i), "target": [float(c) for c in x]})
+            for i, x in zip(v, t)]
+    atomic_write(path, "[\n" + ",\n".join(f"  {r}" for r in rows) + "\n]\n")

@@ -250,13 +250,7 @@ class Fitter:
         L_tf = (lt - t0) @ R0 / s0  # the landmarks' targets in the template's frame
         X = V
         if len(lv):
-            t1 = time.perf_counter()
-            res = arap_solve(self._landmark_problem(lv), L_tf, init=V, accelerate=True,
-                             max_iter=LANDMARK_ITER)
-            timings["landmarks"] = time.perf_counter() - t1
-            stages.append(StageReport("landmarks", None, res.iterations, list(res.history),
-                                      time_s=timings["landmarks"]))
-            X = res.vertices
+            X = self._bend(lv, L_tf, T, fit_scale, inner, stages, timings)
         system = self._system(lv)
         f0, fs0 = system.factorisations, system.factor_s
         loop = StageLoop(self.backend, system, inner, np.ascontiguousarray(X[p.perm] / unit),
@@ -282,6 +276,38 @@ class Fitter:
             time.perf_counter() - t_start, stages, timings,
             factorisations=system.factorisations - f0, scale_fitted=fit_scale)
         return FitResult(out, residuals, matched, report, T, self.template)
+
+    def _bend(self, lv, L_tf, T: Similarity, fit_scale: bool, inner: FitTarget, stages,
+              timings) -> np.ndarray:
+        """The template bent onto its landmarks by ARAP (template frame).
+
+        ARAP with a few point handles has several minima, and the one the local/global
+        iteration finds depends on its start. Two starts are tried: the template placed by
+        the landmarks' best similarity, and (its size kept) the template where it is; the
+        bent template nearer the target wins (mean squared distance, truncated at 5 % of
+        the diagonal). The landmarks' best rigid motion can be far from the template's own
+        orientation when the pose changed (three landmarks on a bent finger tilt it by
+        half the bend), and the template's own placement is what a user usually gives.
+        """
+        t1 = time.perf_counter()
+        problem = self._landmark_problem(lv)
+        V = self.template.vertices
+        starts = [V]
+        if not fit_scale:
+            s0, R0, t0 = T
+            starts.append((V - t0) @ R0 / s0)  # where the template is, in its own frame
+        best, best_d = None, np.inf
+        cap = (0.05 * self.diagonal * self.problem.scale) ** 2
+        for start in starts:
+            res = arap_solve(problem, L_tf, init=start, accelerate=True, max_iter=LANDMARK_ITER)
+            d = float(np.minimum(inner.match(res.vertices / self.problem.scale).d2
+                                 * self.problem.scale ** 2, cap).mean())
+            if d < best_d:
+                best, best_d = res, d
+        timings["landmarks"] = time.perf_counter() - t1
+        stages.append(StageReport("landmarks", None, best.iterations, list(best.history),
+                                  time_s=timings["landmarks"]))
+        return best.vertices
 
     def _fits_scale(self, lv: np.ndarray, lt: np.ndarray) -> bool:
         """Whether this fit fits the template's size (see ``scale``)."""

@@ -114,6 +114,7 @@ class StageLoop:
         self._b = np.empty((nf, 3))
         self._zeros = np.zeros((nf, 3))
         self._fixed = (self.system.L_fc @ self.C if len(self.C) else np.zeros((nf, 3)))
+        self.P[self.system.constrained] = self.C  # the landmarks are where they must be
 
     # -- one evaluation -----------------------------------------------------------------
     def measure(self, x: np.ndarray, search: bool = False) -> tuple[Matches, float]:
