@@ -58,26 +58,29 @@ def _split(A: np.ndarray, path) -> tuple[np.ndarray, np.ndarray | None]:
 
 def ply_points(path) -> tuple[np.ndarray, np.ndarray | None] | None:
     """Positions (and normals, from ``nx ny nz``) of a PLY without faces; None when it has
-    faces (a mesh)."""
-    from plyfile import PlyData, PlyHeaderParseError
+    faces (a mesh). Read by trimesh, as the mesh reader does."""
+    import trimesh
 
     try:
-        ply = PlyData.read(io.BytesIO(read_input(path, "point clouds")))
-    except (PlyHeaderParseError, ValueError, EOFError, KeyError) as e:
+        loaded = trimesh.load(io.BytesIO(read_input(path, "point clouds")), file_type="ply",
+                              process=False)
+    except InputError:
+        raise
+    except Exception as e:  # trimesh raises many types on malformed PLY
         raise InputError(f"{path}: not a readable PLY file ({e})") from None
-    names = [el.name for el in ply.elements]
-    if "face" in names and ply["face"].count > 0:
+    if len(getattr(loaded, "faces", ())):
         return None
-    if "vertex" not in names:
-        raise InputError(f"{path}: PLY has no vertex element")
-    v = ply["vertex"].data
-    fields = v.dtype.names or ()
-    if not {"x", "y", "z"} <= set(fields):
-        raise InputError(f"{path}: PLY vertices have no x, y, z")
-    P = np.stack([np.asarray(v[c], dtype=np.float64) for c in "xyz"], axis=1)
-    N = (np.stack([np.asarray(v[c], dtype=np.float64) for c in ("nx", "ny", "nz")], axis=1)
-         if {"nx", "ny", "nz"} <= set(fields) else None)
-    return P, N
+    data = getattr(loaded, "metadata", {}).get("_ply_raw", {}).get("vertex", {}).get("data")
+    names = list(data) if isinstance(data, dict) else getattr(
+        getattr(data, "dtype", None), "names", None) or []
+    if not {"x", "y", "z"} <= set(names):
+        raise InputError(f"{path}: PLY has no vertices with x, y, z")
+
+    def cols(keys):
+        return np.stack([np.asarray(data[k], dtype=np.float64).reshape(-1) for k in keys], 1)
+
+    normals = cols(("nx", "ny", "nz")) if {"nx", "ny", "nz"} <= set(names) else None
+    return cols("xyz"), normals
 
 
 def load_points(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray | None]:

@@ -43,7 +43,7 @@ BORDER_NEIGHBOURS = 16
 #: a cloud point whose neighbours leave an angular gap wider than this is on its border
 BORDER_GAP = np.deg2rad(135.0)
 #: k-d tree candidates per query, and the most moves of the walk that follows
-START_CANDIDATES = 4
+START_CANDIDATES = 8
 MAX_WALK = 64
 
 
