@@ -22,7 +22,7 @@ from arapkit.cli import main
 from arapkit.io.landmarks import load_landmarks, parse_landmarks, save_landmarks
 from arapkit.io.points import load_points
 from arapkit.mesh.shapes import bar, bar_bend
-from arapkit.methods.fit import Fitter, FitTarget, fit
+from arapkit.methods.fit import FitTarget, Fitter, fit
 from arapkit.methods.fit.align import similarity
 
 ROOT = Path(__file__).resolve().parents[1]
