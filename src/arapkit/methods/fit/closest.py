@@ -32,6 +32,11 @@ import numpy as np
 
 __all__ = ["closest_on_triangle", "match_disks", "match_triangles", "boundary_points"]
 
+#: queries from which the matching kernels use threads: below, a parallel region's start
+#: (a scheduler time slice per thread on a shared machine) can cost what it saves (measured
+#: on 2 shared cores: no difference at 845 or 13,750 queries)
+PARALLEL_QUERIES = 20_000
+
 #: where a triangle's closest point lies: the interior, one of its corners, one of its edges
 INTERIOR, CORNER_A, CORNER_B, CORNER_C, EDGE_AB, EDGE_AC, EDGE_BC = range(7)
 
@@ -97,7 +102,65 @@ def _tri_d2(X, i, V, F, f, tmp):
     return dx * dx + dy * dy + dz * dz, reg
 
 
+@nb.njit(cache=True, nogil=True)
+def _match_triangle(i, X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex,
+                    max_steps, q, elem, d2, on_border, tmp):
+    best = np.inf
+    bf = -1
+    breg = 0
+    bq0 = bq1 = bq2 = 0.0
+    for t in range(start.shape[1] + 1):
+        f = prev[i] if t == start.shape[1] else start[i, t]
+        if f < 0:
+            continue
+        dd, reg = _tri_d2(X, i, V, F, f, tmp)
+        if dd < best:
+            best, bf, breg = dd, f, reg
+            bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
+    for _ in range(max_steps):
+        moved = False
+        cur = bf
+        for t in range(nbr_ptr[cur], nbr_ptr[cur + 1]):
+            f = nbr_idx[t]
+            dd, reg = _tri_d2(X, i, V, F, f, tmp)
+            if dd < best:
+                best, bf, breg = dd, f, reg
+                bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
+                moved = True
+        if not moved:
+            break
+    q[i, 0], q[i, 1], q[i, 2] = bq0, bq1, bq2
+    elem[i] = bf
+    d2[i] = best
+    border = False
+    if breg == EDGE_AB:
+        border = border_edge[bf, 0]
+    elif breg == EDGE_AC:
+        border = border_edge[bf, 1]
+    elif breg == EDGE_BC:
+        border = border_edge[bf, 2]
+    elif breg != INTERIOR:
+        border = border_vertex[F[bf, breg - CORNER_A]]
+    on_border[i] = border
+
+
 @nb.njit(parallel=True, cache=True, nogil=True)
+def _match_triangles_parallel(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge,
+                              border_vertex, max_steps, q, elem, d2, on_border):
+    for i in nb.prange(X.shape[0]):
+        _match_triangle(i, X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex,
+                        max_steps, q, elem, d2, on_border, np.empty(3))
+
+
+@nb.njit(cache=True, nogil=True)
+def _match_triangles_serial(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge,
+                            border_vertex, max_steps, q, elem, d2, on_border):
+    tmp = np.empty(3)
+    for i in range(X.shape[0]):
+        _match_triangle(i, X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex,
+                        max_steps, q, elem, d2, on_border, tmp)
+
+
 def match_triangles(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex,
                     max_steps, q, elem, d2, on_border):
     """Closest point on a triangle mesh for every row of X.
@@ -106,48 +169,12 @@ def match_triangles(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_
     match, -1 if none); then a greedy walk over ``nbr`` (faces sharing a vertex) while the
     distance drops, at most ``max_steps`` moves. ``on_border[i]`` is True when the closest
     point lies on a boundary edge (``border_edge[f, e]``, e = ab, ac, bc) or a boundary
-    vertex.
+    vertex. Threads from :data:`PARALLEL_QUERIES` queries on.
     """
-    n = X.shape[0]
-    for i in nb.prange(n):
-        tmp = np.empty(3)
-        best = np.inf
-        bf = -1
-        breg = 0
-        bq0 = bq1 = bq2 = 0.0
-        for t in range(start.shape[1] + 1):
-            f = prev[i] if t == start.shape[1] else start[i, t]
-            if f < 0:
-                continue
-            dd, reg = _tri_d2(X, i, V, F, f, tmp)
-            if dd < best:
-                best, bf, breg = dd, f, reg
-                bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
-        for _ in range(max_steps):
-            moved = False
-            cur = bf
-            for t in range(nbr_ptr[cur], nbr_ptr[cur + 1]):
-                f = nbr_idx[t]
-                dd, reg = _tri_d2(X, i, V, F, f, tmp)
-                if dd < best:
-                    best, bf, breg = dd, f, reg
-                    bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
-                    moved = True
-            if not moved:
-                break
-        q[i, 0], q[i, 1], q[i, 2] = bq0, bq1, bq2
-        elem[i] = bf
-        d2[i] = best
-        border = False
-        if breg == EDGE_AB:
-            border = border_edge[bf, 0]
-        elif breg == EDGE_AC:
-            border = border_edge[bf, 1]
-        elif breg == EDGE_BC:
-            border = border_edge[bf, 2]
-        elif breg != INTERIOR:
-            border = border_vertex[F[bf, breg - CORNER_A]]
-        on_border[i] = border
+    kernel = (_match_triangles_parallel if len(X) >= PARALLEL_QUERIES
+              else _match_triangles_serial)
+    kernel(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex, max_steps, q,
+           elem, d2, on_border)
 
 
 @nb.njit(cache=True, nogil=True)
@@ -167,7 +194,56 @@ def _disk_d2(X, i, P, N, radius, j, tmp):
     return ex * ex + ey * ey + ez * ez, rim
 
 
+@nb.njit(cache=True, nogil=True)
+def _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point, max_steps,
+                q, elem, d2, on_border, tmp):
+    best = np.inf
+    bj = -1
+    brim = False
+    bq0 = bq1 = bq2 = 0.0
+    for t in range(start.shape[1] + 1):
+        j = prev[i] if t == start.shape[1] else start[i, t]
+        if j < 0:
+            continue
+        dd, rim = _disk_d2(X, i, P, N, radius, j, tmp)
+        if dd < best:
+            best, bj, brim = dd, j, rim
+            bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
+    for _ in range(max_steps):
+        moved = False
+        cur = bj
+        for t in range(nbr_ptr[cur], nbr_ptr[cur + 1]):
+            j = nbr_idx[t]
+            dd, rim = _disk_d2(X, i, P, N, radius, j, tmp)
+            if dd < best:
+                best, bj, brim = dd, j, rim
+                bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
+                moved = True
+        if not moved:
+            break
+    q[i, 0], q[i, 1], q[i, 2] = bq0, bq1, bq2
+    elem[i] = bj
+    d2[i] = best
+    on_border[i] = brim and border_point[bj]
+
+
 @nb.njit(parallel=True, cache=True, nogil=True)
+def _match_disks_parallel(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
+                          max_steps, q, elem, d2, on_border):
+    for i in nb.prange(X.shape[0]):
+        _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
+                    max_steps, q, elem, d2, on_border, np.empty(3))
+
+
+@nb.njit(cache=True, nogil=True)
+def _match_disks_serial(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
+                        max_steps, q, elem, d2, on_border):
+    tmp = np.empty(3)
+    for i in range(X.shape[0]):
+        _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
+                    max_steps, q, elem, d2, on_border, tmp)
+
+
 def match_disks(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point, max_steps,
                 q, elem, d2, on_border):
     """Closest point on a union of oriented disks (one per cloud point) for every row of X.
@@ -175,37 +251,9 @@ def match_disks(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point, ma
     As :func:`match_triangles`; ``on_border[i]`` is True when the closest point is on the
     rim of a boundary point's disk (x lies beyond the scan's edge).
     """
-    n = X.shape[0]
-    for i in nb.prange(n):
-        tmp = np.empty(3)
-        best = np.inf
-        bj = -1
-        brim = False
-        bq0 = bq1 = bq2 = 0.0
-        for t in range(start.shape[1] + 1):
-            j = prev[i] if t == start.shape[1] else start[i, t]
-            if j < 0:
-                continue
-            dd, rim = _disk_d2(X, i, P, N, radius, j, tmp)
-            if dd < best:
-                best, bj, brim = dd, j, rim
-                bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
-        for _ in range(max_steps):
-            moved = False
-            cur = bj
-            for t in range(nbr_ptr[cur], nbr_ptr[cur + 1]):
-                j = nbr_idx[t]
-                dd, rim = _disk_d2(X, i, P, N, radius, j, tmp)
-                if dd < best:
-                    best, bj, brim = dd, j, rim
-                    bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
-                    moved = True
-            if not moved:
-                break
-        q[i, 0], q[i, 1], q[i, 2] = bq0, bq1, bq2
-        elem[i] = bj
-        d2[i] = best
-        on_border[i] = brim and border_point[bj]
+    kernel = _match_disks_parallel if len(X) >= PARALLEL_QUERIES else _match_disks_serial
+    kernel(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point, max_steps, q, elem,
+           d2, on_border)
 
 
 @nb.njit(parallel=True, cache=True, nogil=True)
