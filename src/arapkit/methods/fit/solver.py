@@ -50,8 +50,8 @@ __all__ = ["DEFAULT_SCHEDULE", "FitResult", "Fitter", "fit"]
 
 #: stiffness lengths of the stages, as fractions of the template's bounding-box diagonal
 DEFAULT_SCHEDULE = (0.3, 0.1, 0.03, 0.01, 0.003)
-#: iterations per stage at most
-STAGE_ITER = 20
+#: iterations per stage at most (20 cost 50 % more time for 1-2 % lower errors, measured)
+STAGE_ITER = 10
 #: the proximal weight keeping vertices without data definite, relative to the mean
 #: diagonal of the ARAP matrix
 PROX = 1e-4
@@ -295,7 +295,11 @@ class Fitter:
         starts = [V]
         if not fit_scale:
             s0, R0, t0 = T
-            starts.append((V - t0) @ R0 / s0)  # where the template is, in its own frame
+            here = (V - t0) @ R0 / s0  # where the template is, in its own frame
+            # the same start twice when the landmarks hardly move the template
+            if np.sqrt(((here - V) ** 2).sum(axis=1).mean()) > 0.01 * self.diagonal * \
+                    self.problem.scale:
+                starts.append(here)
         best, best_d = None, np.inf
         cap = (0.05 * self.diagonal * self.problem.scale) ** 2
         for start in starts:
