@@ -369,7 +369,13 @@ class Fitter:
         V = self.template.vertices
         X = s * V @ R.T + t
         reach = 0.1 * max(tgt.diagonal, s * self.diagonal * self.problem.scale)
-        near = int(np.count_nonzero(tgt.match(X).d2 <= reach * reach))
+        # the nearest element centre: at least as far as the element, so never an overlap
+        # the surface does not have (and one k-d query, not a search and walk)
+        near = int(np.count_nonzero(tgt.tree.query(X, k=1, distance_upper_bound=reach,
+                                                   workers=-1)[0] <= reach))
+        if near < max(3, MIN_OVERLAP * len(V)) and tgt.kind == "mesh":
+            # large triangles have far centres: ask the triangles themselves
+            near = int(np.count_nonzero(tgt.match(X).d2 <= reach * reach))
         if near < max(3, MIN_OVERLAP * len(V)):
             raise InputError(
                 f"{tgt.name}: no overlap with the template {self.template.name} (only {near} "
