@@ -13,9 +13,9 @@ only, not on the target. :class:`StageSystems` factorises it once per stage and 
 factors for every later fit of the same template with the same landmark vertices (a
 sequence of scans), so an iteration costs one pair of triangular solves and a fit none.
 
-The alternative, a matrix that changes with the matches (a factor per stage for its first
-matches, then conjugate gradients preconditioned with it), needed one to three
-factorisations and tens of CG steps per stage on every fit (measured in ``docs/fit.md``).
+The alternative, a matrix that changes with the matches (a factor at each stage's start,
+then conjugate gradients preconditioned with it), needed a factorisation and 38-130 CG steps
+a stage on every fit (measured in ``docs/fit.md``).
 
 Examples
 --------
