@@ -31,6 +31,17 @@ So the energy never rises within a stage (tests check it). Anderson acceleration
 (:class:`arapkit.arap.accel.Anderson`) extrapolates the positions and keeps an extrapolation
 only when it lowers the energy, as the deformation loop does; a stage ends when a plain
 step lowers the energy by less than ``tol`` (relative), or after ``stage_iter`` steps.
+
+Examples
+--------
+>>> import numpy as np
+>>> from arapkit.methods.fit.target import Matches
+>>> m = Matches(np.zeros((3, 3)), np.zeros(3, int), np.array([0.01, 0.04, 9.0]),
+...             np.array([False, False, True]), np.tile([0.0, 0.0, 1.0], (3, 1)))
+>>> eligible(m, np.tile([0.0, 0.0, 1.0], (3, 1)), True, 0.0).tolist()  # the third: border
+[True, True, False]
+>>> threshold(m, np.array([True, True, False]), diagonal=10.0)   # 4 x median 0.15, >= 0.2
+0.6000000000000001
 """
 
 from __future__ import annotations
