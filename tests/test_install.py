@@ -103,8 +103,10 @@ def test_edit_without_the_editor_extra_names_it(blocked):
         (["compare", EX / "bar.off", "-H", EX / "bar.sel", "-o", "{tmp}/cmp"],
          "arapkit compare"),
         (["demo", "--out", "{tmp}/demo"], "arapkit demo"),
+        (["fit", EX / "finger.off", EX / "finger-scan.xyz", "-o", "{tmp}/out.ply",
+          "--figure", "{tmp}/f.png"], "arapkit fit --figure"),
     ],
-    ids=["deform", "deform-dry-run", "learn", "compare", "demo"],
+    ids=["deform", "deform-dry-run", "learn", "compare", "demo", "fit"],
 )
 def test_figures_without_the_plots_extra_name_it(tmp_path, args, what):
     args = [str(a).format(tmp=tmp_path) for a in args]

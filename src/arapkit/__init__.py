@@ -47,6 +47,7 @@ from .mesh.model import Mesh
 from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .methods.deformer import Deformer, Result
 from .methods.dynamics import Simulator, simulate
+from .methods.fit import FitResult, Fitter, fit
 from .methods.laplacian import LaplacianEditor, laplacian_edit
 
 
@@ -68,6 +69,8 @@ del _installed_version
 __all__ = [
     "BoundingBox",
     "Deformer",
+    "FitResult",
+    "Fitter",
     "HandleGroup",
     "HandleSet",
     "InputError",
@@ -80,6 +83,7 @@ __all__ = [
     "VertexGroups",
     "__version__",
     "bounding_box",
+    "fit",
     "guess_up",
     "laplacian_edit",
     "learn_rings",

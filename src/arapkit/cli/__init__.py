@@ -41,6 +41,7 @@ COMMANDS: list[tuple[str, str]] = [
     ("batch", "arapkit.cli.batch"),
     ("simulate", "arapkit.cli.simulate"),
     ("warp", "arapkit.cli.warp"),
+    ("fit", "arapkit.cli.fit"),
 ]
 
 _EPILOG = """examples (from a clone of the repository, which ships examples/):

@@ -339,10 +339,22 @@ class CPUBackend:
         # the expanded form, and the user must never be shown one
         return max(E, 0.0) if self.nonneg else E
 
-    def rhs(self, fixed_rhs: np.ndarray, rhs: np.ndarray) -> None:
-        """Right-hand side of the free vertices from the last local step."""
+    def rhs(self, fixed_rhs: np.ndarray, rhs: np.ndarray, slot: np.ndarray | None = None) -> None:
+        """Right-hand side of the free vertices from the last local step.
+
+        ``slot`` (each vertex's row, -1 for a constrained one) replaces the bound problem's
+        split, for a caller that solves a system of its own with the same rotations (the
+        template fit of :mod:`arapkit.methods.fit`, whose matrix adds its data term).
+        """
         gather_rhs(self.buf, self.win_lo, self.win_off, self.chunk_ptr, self.cover_ptr,
-                   self.cover_idx, self.slot, fixed_rhs, rhs)
+                   self.cover_idx, self.slot if slot is None else slot, fixed_rhs, rhs)
+
+    def terms(self) -> tuple[float, float]:
+        """``(sum_k tr(R_k S_k), sum_e D_e |e'|^2)`` of the last local step: the energy is
+        ``quad + rest_term - 2 tr``, and with a global scale s of the rest shape
+        ``quad + s^2 rest_term - 2 s tr``."""
+        tr, quad = self.partial.sum(axis=0)
+        return float(tr), float(quad)
 
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> np.ndarray:
         """Global step: ``A_ff^{-1} rhs``."""
