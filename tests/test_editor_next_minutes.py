@@ -9,6 +9,7 @@ is there, the cow of ../shared/data (skipped with the reason otherwise).
 
 from __future__ import annotations
 
+import dataclasses
 import time
 from pathlib import Path
 from types import SimpleNamespace
@@ -481,5 +482,36 @@ def test_browser_slider_drag_and_undo_click(tmp_path):
             _click_button(page, "Undo")
             wait_for(lambda: np.all(st.rings == 1), 15, "one Undo to bring r = 1 back")
             assert not st.can_undo
+    finally:
+        app.stop()
+
+
+# ------------------------------------------------------------------ coarse to fine switch
+def test_the_solver_panel_switches_coarse_to_fine(tmp_path, monkeypatch):
+    """Auto / On / Off in the Solver panel is the session's ``solver.multires``, and the
+    solve follows it: above the (patched) size Auto and On preview on a proxy, Off solves
+    the full mesh; a session's value shows in the panel."""
+    import arapkit.methods.dispatch as dispatch
+    from arapkit.methods.multires import MultiresDeformer
+
+    monkeypatch.setattr(dispatch, "MULTIRES_AUTO_VERTICES", 100)  # the bar counts as large
+    app = bar_app(tmp_path)
+    try:
+        assert app.dd_multires.value == "Auto" and app.state.settings.multires is None
+        assert app.wait_idle(120)
+        assert isinstance(app.worker.deformer, MultiresDeformer)
+        for label, want, cls in (("Off", False, False), ("On", True, True)):
+            with app.lock:
+                app.quietly(lambda label=label: setattr(app.dd_multires, "value", label))
+            app.ui(lambda e: app._apply_settings())(event())
+            assert app.wait_idle(120)
+            assert app.state.settings.multires is want
+            assert isinstance(app.worker.deformer, MultiresDeformer) is cls
+        saved = app.state.to_dict()
+        assert saved["solver"]["multires"] is True
+        app.state.settings = dataclasses.replace(app.state.settings, multires=False)
+        with app.lock:
+            app.sync_gui_from_state()
+        assert app.dd_multires.value == "Off"
     finally:
         app.stop()

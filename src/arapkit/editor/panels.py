@@ -26,7 +26,12 @@ from arapkit import validate
 from arapkit.editor.files import MESH_SUFFIXES
 from arapkit.editor.geometry import UP_AXES
 from arapkit.editor.groups import ERASE
-from arapkit.editor.settings import SolverSettings, solver_choices
+from arapkit.editor.settings import (
+    MULTIRES_CHOICES,
+    SolverSettings,
+    multires_label,
+    solver_choices,
+)
 from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, find_tool
 from arapkit.editor.topbar import TopBlock
@@ -274,6 +279,10 @@ class Panels:
         self.nb_maxit = gui.add_number("Max iterations", s.max_iter, min=1, max=100000, step=1)
         self.nb_budget = gui.add_number("Live budget (ms)", s.live_budget_ms, min=1.0,
                                         max=5000.0, step=1.0)
+        self.dd_multires = gui.add_dropdown(
+            "Coarse to fine", tuple(MULTIRES_CHOICES), initial_value=multires_label(s.multires),
+            hint="Auto: from 100,000 vertices a decimated proxy previews the drag and starts "
+                 "the exact solve (docs/interactive.md); On or Off forces it")
         self.cb_dynamics = gui.add_checkbox(
             "Secondary motion", s.dynamics,
             hint="Drags move an elastic body that lags behind the handles and settles "
@@ -346,7 +355,7 @@ class Panels:
         self.cb_show_handles.on_update(ui(lambda e: self.draw_markers()))
         self.dd_up.on_update(ui(lambda e: self._up_chosen()))
         for w in (self.dd_method, self.dd_weights, self.nb_tol, self.nb_maxit, self.nb_budget,
-                  self.cb_dynamics):
+                  self.dd_multires, self.cb_dynamics):
             w.on_update(ui(lambda e: self._apply_settings()))
         self.bt_solve.on_click(ui(lambda e: self.request_solve()))
         self.bt_new_part.on_click(ui(lambda e: self._new_group(rigid=True)))
@@ -378,6 +387,7 @@ class Panels:
         self.dd_weights.value = s.weights
         self.nb_tol.value, self.nb_maxit.value = s.tol, s.max_iter
         self.nb_budget.value = s.live_budget_ms
+        self.dd_multires.value = multires_label(s.multires)
         self.cb_dynamics.value = s.dynamics
         self.sync_handle_widgets()
         self.sync_group_widgets()
@@ -556,6 +566,7 @@ class Panels:
             "tol": self.nb_tol.value,
             "max_iter": self.nb_maxit.value,
             "live_budget_ms": self.nb_budget.value,
+            "multires": MULTIRES_CHOICES.get(self.dd_multires.value, old.multires),
             "dynamics": bool(self.cb_dynamics.value),
         })
         self.state.settings = s
