@@ -58,13 +58,14 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--rings-file", metavar="R", help="per-vertex r (text, .npy or PLY 'rings')")
     p.add_argument(
         "--rings",
+        "-r",
         type=ring_size,
         default=1,
         metavar="N",
         help="uniform r when no rings file is given (default 1)",
     )
-    p.add_argument("--handles", metavar="H", help="handle file (JSON, or .sel with .def)")
-    p.add_argument("--groups", metavar="G",
+    p.add_argument("--handles", "-H", metavar="H", help="handle file (JSON, or .sel with .def)")
+    p.add_argument("--groups", "-G", metavar="G",
                    help="rigid parts and shared-rotation groups to start with (as for "
                    "arapkit deform --groups; paint more with the tool 'Paint part')")
     from arapkit.cli.common import add_weld_option
