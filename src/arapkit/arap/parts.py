@@ -28,6 +28,12 @@ and the loop minimises it block by block, each block exactly, so it never rises:
   rotations, so it is factorised once per handle set and reused for every target, as the
   plain problem's.
 
+A system with a diagonal term ``sum_v d_v |x_v|^2`` beside the edges (implicit Euler's masses,
+:mod:`arapkit.arap.dynamics`) passes ``diag``: it is summed into each merged row like the
+edges, adds ``-sum_{v in P} d_v a_v t_P^T`` to ``M_P``, and a free part then turns about its
+centre of ``d`` (``ref``) rather than its centre vertex: the block stays exact, and the turn
+keeps ``sum_v d_v x_v``, so a step's linear momentum is that of the global step's solution.
+
 Handles inside a part hold it (:func:`hold_parts`): three or more not on one line fix it
 (their best rigid fit places it: a set of handles no rigid motion meets is refused, naming
 the part); handles on one line make it a hinge about that line (its rotation about the line
@@ -267,6 +273,13 @@ class PartSystem:
         How many of ``z_cols`` are free parts' non-centre vertices.
     cross_w : (c,) float
         ``D_e`` of the layout's crossing edges, for this energy.
+    ref : (P, 3) float or None
+        The point each part turns about in the local step, relative to its centre in rest
+        coordinates (None: the centre itself; with ``diag``, a free part's centre of
+        ``diag``).
+    diag_moment : (P, 3) float or None
+        ``sum_{v in P} d_v (a_v - ref_P)``: the diagonal term's share of ``M_P`` is minus
+        its product with the turning point (None without ``diag``).
     """
 
     layout: PartLayout
@@ -278,12 +291,16 @@ class PartSystem:
     z_cols: np.ndarray
     n_followers: int
     cross_w: np.ndarray
+    ref: np.ndarray | None = None
+    diag_moment: np.ndarray | None = None
 
     @classmethod
     def build(cls, layout: PartLayout, graph: EdgeGraph, system_w: np.ndarray,
-              constrained: np.ndarray, name: str, remedy="") -> PartSystem:
+              constrained: np.ndarray, name: str, remedy="",
+              diag: np.ndarray | None = None) -> PartSystem:
         """Factorise the merged system for ``constrained`` (handles and anchors outside
-        parts and inside them, solver numbering)."""
+        parts and inside them, solver numbering); ``diag`` (n,), solver numbering, adds
+        ``sum_v d_v |x_v|^2`` to the energy (a mass term, see the module)."""
         n = graph.n_vertices
         rest = graph.vertices
         holds = hold_parts(layout, constrained, rest)
@@ -303,8 +320,11 @@ class PartSystem:
         keep = ends[:, 0] != ends[:, 1]
         # followers are listed as constrained for the split (they are no unknowns) and
         # then dropped: no edge reaches them any more, so their columns are empty
+        d = None if diag is None else np.asarray(diag, dtype=np.float64)
         el = Elimination.from_edges(n, ends[keep], system_w[keep],
-                                    np.concatenate([cons, followers]), name, remedy)
+                                    np.concatenate([cons, followers]), name, remedy,
+                                    # a merged row holds its part's whole diagonal
+                                    diag=None if d is None else np.bincount(node, d, n))
         el = Elimination(el.free, cons, el.slot, el.A_fc[:, :len(cons)].tocsr(), el.factor)
         rows = el.slot[node]
         mine = rows >= 0
@@ -314,11 +334,23 @@ class PartSystem:
         L = sp.csc_matrix((np.concatenate([-system_w, -system_w, system_w, system_w]),
                            (np.concatenate([a, b, a, b]), np.concatenate([b, a, a, b]))),
                           shape=(n, n))
+        if d is not None:
+            L = (L + sp.diags(d)).tocsc()
         z_cols = np.concatenate([followers, cons]).astype(np.int64)
         A_z = L[:, z_cols].tocsr()
         a_v = rest[layout.verts] - rest[centre_of]
+        ref = dm = None
+        if d is not None:
+            k = layout.n_parts
+            dv = d[layout.verts]
+            d_p = np.bincount(vp, dv, k)
+            first = np.stack([np.bincount(vp, dv * a_v[:, c], k) for c in range(3)], axis=1)
+            ref = np.zeros((k, 3))
+            turn = (holds.kind == FREE) & (d_p > 0)  # held parts turn about their handles
+            ref[turn] = first[turn] / d_p[turn, None]
+            dm = first - d_p[:, None] * ref
         return cls(layout, holds, el, a_v, gather, A_z, z_cols, len(followers),
-                   system_w[layout.cross_edge])
+                   system_w[layout.cross_edge], ref, dm)
 
     # -- the parts' motions ------------------------------------------------------------
     def place(self, P: np.ndarray, R: np.ndarray, slots: np.ndarray | None = None) -> None:
@@ -343,22 +375,36 @@ class PartSystem:
         self.place(P, R)
         return R
 
-    def moments(self, P: np.ndarray, b: np.ndarray, own: np.ndarray | None = None
-                ) -> np.ndarray:
+    def moments(self, P: np.ndarray, b: np.ndarray, own: np.ndarray | None = None,
+                R: np.ndarray | None = None) -> np.ndarray:
         """``M_P`` of every part at positions ``P`` and vertex right-hand sides ``b``;
-        ``own`` (:meth:`own_moments`, which does not move with ``P``) when known."""
-        lay, hold = self.layout, self.holds
+        ``own`` (:meth:`own_moments`, which does not move with ``P``) when known. With a
+        turning point (:attr:`ref`), the parts' rotations ``R`` place it and ``a_v`` is
+        taken from it."""
+        lay = self.layout
         k = lay.n_parts
         M = self.own_moments(b) if own is None else own.copy()
-        d = P[lay.cross_j] - P[hold.centre[lay.cross_part]]
-        ac = self.a[self._cross_slot] * self.cross_w[:, None]
+        g = self._turning_points(P, R)
+        d = P[lay.cross_j] - g[lay.cross_part]
+        a = self.a[self._cross_slot]
+        if self.ref is not None:
+            a = a - self.ref[lay.cross_part]
+        ac = a * self.cross_w[:, None]
         for r in range(3):
             for c in range(3):
                 M[:, r, c] += np.bincount(lay.cross_part, ac[:, r] * d[:, c], k)
+        if self.diag_moment is not None:
+            M -= self.diag_moment[:, :, None] * g[:, None, :]
         return M
 
+    def _turning_points(self, P: np.ndarray, R: np.ndarray | None) -> np.ndarray:
+        """(P, 3) where each part's turning point is: its centre, or ``ref`` placed."""
+        t = P[self.holds.centre]
+        return t if self.ref is None else t + np.einsum("pab,pb->pa", R, self.ref)
+
     def own_moments(self, b: np.ndarray) -> np.ndarray:
-        """``sum_{v in P} a_v b_v^T`` of every part: ``M_P`` less its crossing edges."""
+        """``sum_{v in P} (a_v - ref_P) b_v^T`` of every part: ``M_P`` less its crossing
+        edges and diagonal term."""
         lay = self.layout
         k = lay.n_parts
         bv = b[lay.verts]
@@ -366,6 +412,9 @@ class PartSystem:
         for r in range(3):
             for c in range(3):
                 M[:, r, c] = np.bincount(lay.vert_part, self.a[:, r] * bv[:, c], k)
+        if self.ref is not None:
+            bsum = np.stack([np.bincount(lay.vert_part, bv[:, c], k) for c in range(3)], 1)
+            M -= self.ref[:, :, None] * bsum[:, None, :]
         return M
 
     @cached_property
@@ -388,14 +437,15 @@ class PartSystem:
         return out
 
     def fit(self, P: np.ndarray, b: np.ndarray, R: np.ndarray) -> float:
-        """The local step of the parts: each moving part's best rotation with its centre
-        held, colour by colour (``P`` and ``R`` updated in place). Returns the energy's
-        change, ``-2 sum_P tr((R_new - R_old) M_P)`` (not positive, up to round-off)."""
+        """The local step of the parts: each moving part's best rotation with its turning
+        point held (its centre, or :attr:`ref`), colour by colour (``P`` and ``R`` updated
+        in place). Returns the energy's change, ``-2 sum_P tr((R_new - R_old) M_P)`` (not
+        positive, up to round-off)."""
         hold = self.holds
         dE = 0.0
         own = self.own_moments(b) if self._colours else None
         for parts, slots in self._colours:
-            M = self.moments(P, b, own)[parts]
+            M = self.moments(P, b, own, R)[parts]
             old = R[parts]
             new = np.empty_like(M)
             # serial: a few matrices, where a parallel region would cost a time slice
@@ -408,6 +458,9 @@ class PartSystem:
             gain = np.einsum("pab,pba->p", new, M) - np.einsum("pab,pba->p", old, M)
             R[parts] = new
             dE -= 2.0 * float(gain.sum())
+            if self.ref is not None:  # the turning point stays: the centre moves
+                c = hold.centre[parts]
+                P[c] += np.einsum("pab,pb->pa", old - new, self.ref[parts])
             self.place(P, R, slots)
         return dE
 
@@ -462,6 +515,18 @@ class PartSystem:
         return out
 
     # -- the held parts' placement ---------------------------------------------------------
+    def constrained_positions(self, rest: np.ndarray, known: np.ndarray, diag: float,
+                              source: str) -> np.ndarray:
+        """Positions of ``elimination.constrained``: the vertices outside parts read from
+        ``known`` (solver numbering; only their rows and the parts' handles' are read), the
+        held parts' placed by :meth:`held_positions`."""
+        cons = self.elimination.constrained
+        outside = int(np.count_nonzero(self.layout.part[cons] < 0))
+        C = np.empty((len(cons), 3))
+        C[:outside] = known[cons[:outside]]
+        C[outside:] = self.held_positions(rest, known, diag, source)
+        return C
+
     def held_positions(self, rest: np.ndarray, known: np.ndarray, diag: float,
                        source: str) -> np.ndarray:
         """Where the held parts' vertices start: fixed parts by the best rigid fit to their
