@@ -265,7 +265,8 @@ class ImplicitEuler:
         )
         if isinstance(p, GroupedProblem) and p.layout is not None:
             self.parts = PartSystem.build(p.layout, p.graph, w, p.iperm[self.constrained],
-                                          p.name, remedy, diag=self.beta * self.m_int)
+                                          p.name, remedy, diag=self.beta * self.m_int,
+                                          nbh=p.energy.nbh)
             return_free_memory()
             return self.parts.elimination
         a, b = E[:, 0], E[:, 1]

@@ -118,7 +118,7 @@ class GroupedProblem(ARAPProblem):
             return None
         base = self.iperm[ARAPProblem.constrained.func(self)]
         return PartSystem.build(self.layout, self.graph, self.energy.system_w, base, self.name,
-                                self._remedy())
+                                self._remedy(), nbh=self.energy.nbh)
 
     def _remedy(self) -> Advice | str:
         """What a factorisation failure advises (as the plain problem's)."""
@@ -297,7 +297,7 @@ class GroupedBackend:
             self.inner.vertex_rhs(self._b)
             if self.extra_rhs is not None:
                 self._b += self.extra_rhs
-            E += ps.fit(P, self._b, self.R_cur)
+            E += ps.fit(P, self._b, self.R_cur, R)
             # with an extra term the fit's change is that of the whole objective, and the
             # sum is no energy of its own (the caller adds the term's value from before)
             if self.nonneg and self.extra_rhs is None:

@@ -18,8 +18,13 @@ and the loop minimises it block by block, each block exactly, so it never rises:
 
       M_P = sum_{v in P} a_v b_v^T + sum_{e = (i in P, j not in P)} D_e a_i (x_j - t_P)^T,
 
-  a Procrustes problem (:func:`~arapkit.arap.rotations.fit_rotations`). Parts joined by an
-  edge are fitted one after the other (a greedy colouring), the others together;
+  a Procrustes problem (:func:`~arapkit.arap.rotations.fit_rotations`). The block also
+  holds the rotations ``R_k`` of the energy's neighbourhoods that lie inside the part: their
+  terms vanish at ``R_k = R_P`` whatever ``R_P`` is, so they leave ``M_P`` (their share,
+  ``Q_k R_k^T`` with ``Q_k = sum_v a_v c_kv^T``, is taken out) and follow the part. Held at
+  their old values instead they would pull the part back to its last rotation, and a part
+  would turn a little each iteration. Parts joined by an edge are fitted one after the other
+  (a greedy colouring), the others together;
 * **global step**: ``x = B y + z``, with ``y`` the free vertices and each free part's
   centre (``t_P``), ``B`` copying a centre to its part, and ``z`` the parts' offsets
   ``R_P a_v`` and the constrained positions. The minimiser solves
@@ -280,6 +285,9 @@ class PartSystem:
     diag_moment : (P, 3) float or None
         ``sum_{v in P} d_v (a_v - ref_P)``: the diagonal term's share of ``M_P`` is minus
         its product with the turning point (None without ``diag``).
+    interior : (owners, parts, Q) or None
+        The energy's neighbourhoods that lie inside one part, that part, and ``Q_k``
+        (None when not given the neighbourhoods).
     """
 
     layout: PartLayout
@@ -293,14 +301,17 @@ class PartSystem:
     cross_w: np.ndarray
     ref: np.ndarray | None = None
     diag_moment: np.ndarray | None = None
+    interior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @classmethod
     def build(cls, layout: PartLayout, graph: EdgeGraph, system_w: np.ndarray,
               constrained: np.ndarray, name: str, remedy="",
-              diag: np.ndarray | None = None) -> PartSystem:
+              diag: np.ndarray | None = None, nbh=None) -> PartSystem:
         """Factorise the merged system for ``constrained`` (handles and anchors outside
         parts and inside them, solver numbering); ``diag`` (n,), solver numbering, adds
-        ``sum_v d_v |x_v|^2`` to the energy (a mass term, see the module)."""
+        ``sum_v d_v |x_v|^2`` to the energy (a mass term, see the module); ``nbh`` (the
+        energy's :class:`~arapkit.arap.rings.Neighbourhoods`) lets the part fit hold the
+        rotations of the neighbourhoods inside a part."""
         n = graph.n_vertices
         rest = graph.vertices
         holds = hold_parts(layout, constrained, rest)
@@ -350,7 +361,8 @@ class PartSystem:
             ref[turn] = first[turn] / d_p[turn, None]
             dm = first - d_p[:, None] * ref
         return cls(layout, holds, el, a_v, gather, A_z, z_cols, len(followers),
-                   system_w[layout.cross_edge], ref, dm)
+                   system_w[layout.cross_edge], ref, dm,
+                   None if nbh is None else _interior(layout, nbh, a_v))
 
     # -- the parts' motions ------------------------------------------------------------
     def place(self, P: np.ndarray, R: np.ndarray, slots: np.ndarray | None = None) -> None:
@@ -436,14 +448,24 @@ class PartSystem:
             out.append((parts, np.flatnonzero(np.isin(lay.vert_part, parts))))
         return out
 
-    def fit(self, P: np.ndarray, b: np.ndarray, R: np.ndarray) -> float:
+    def fit(self, P: np.ndarray, b: np.ndarray, R: np.ndarray,
+            R_own: np.ndarray | None = None) -> float:
         """The local step of the parts: each moving part's best rotation with its turning
         point held (its centre, or :attr:`ref`), colour by colour (``P`` and ``R`` updated
         in place). Returns the energy's change, ``-2 sum_P tr((R_new - R_old) M_P)`` (not
-        positive, up to round-off)."""
+        positive, up to round-off). ``R_own`` (the energy's rotations from the local step)
+        lets the neighbourhoods inside a part turn with it (see the module); those
+        rotations are set to their part's."""
         hold = self.holds
         dE = 0.0
         own = self.own_moments(b) if self._colours else None
+        inside = self.interior if R_own is not None else None
+        if own is not None and inside is not None and len(inside[0]):
+            ks, kp, Q = inside
+            QR = Q @ R_own[ks].transpose(0, 2, 1)
+            for r in range(3):
+                for c in range(3):
+                    own[:, r, c] -= np.bincount(kp, QR[:, r, c], self.layout.n_parts)
         for parts, slots in self._colours:
             M = self.moments(P, b, own, R)[parts]
             old = R[parts]
@@ -462,6 +484,8 @@ class PartSystem:
                 c = hold.centre[parts]
                 P[c] += np.einsum("pab,pb->pa", old - new, self.ref[parts])
             self.place(P, R, slots)
+        if inside is not None:
+            R_own[inside[0]] = R[inside[1]]
         return dE
 
     def _hinge(self, P: np.ndarray, parts: np.ndarray, old: np.ndarray,
@@ -557,3 +581,27 @@ class PartSystem:
             out.append((rest[vs] - rest[c]) @ R.T + known[c])
         return np.concatenate(out) if out else np.zeros((0, 3))
 
+
+
+def _interior(layout: PartLayout, nbh, a: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The owners whose neighbourhood (every vertex its right-hand side touches) lies in one
+    part, that part, and ``Q_k = sum_v a_v c_kv^T`` (``a`` in ``layout.verts`` order)."""
+    ptr, idx, coef = nbh.disk_ptr, nbh.disk_idx, nbh.disk_coef
+    sizes = np.diff(ptr)
+    has = np.flatnonzero(sizes > 0)
+    pv = layout.part[idx]
+    if not len(has):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3, 3))
+    lo, hi = np.minimum.reduceat(pv, ptr[has]), np.maximum.reduceat(pv, ptr[has])
+    inner = (lo == hi) & (lo >= 0)
+    owners, parts = has[inner].astype(np.int64), lo[inner].astype(np.int64)
+    mine = np.repeat(np.isin(np.arange(len(sizes)), owners), sizes)
+    local = np.repeat(np.arange(len(owners)), sizes[owners])
+    slot = np.full(len(layout.part), -1, dtype=np.int64)
+    slot[layout.verts] = np.arange(len(layout.verts))
+    av, cv = a[slot[idx[mine]]], coef[mine]
+    Q = np.empty((len(owners), 3, 3))
+    for r in range(3):
+        for c in range(3):
+            Q[:, r, c] = np.bincount(local, av[:, r] * cv[:, c], len(owners))
+    return owners, parts, Q
