@@ -61,7 +61,7 @@ from .constraints import Elimination, return_free_memory
 from .energies import energy_info
 from .grouped import GroupedBackend, GroupedProblem
 from .loop import energy_floor
-from .parts import PartSystem
+from .parts import PartSystem, nearest_rotations
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -363,11 +363,18 @@ class ImplicitEuler:
         phi_prev = objective()
         floor = energy_floor(be.rest_term)
         nf = len(free)
+        # with rigid parts the iterate also holds the rotations they are placed with (three
+        # rows of three each): extrapolating the positions alone would place the parts
+        # with stale rotations, and the safeguard would refuse nearly every extrapolation
+        nr = 3 * self.parts.layout.n_parts if self.parts is not None else 0
         rhs = np.empty((nf, 3))
-        g = np.empty((nf, 3))
-        aa = Anderson(3 * nf, history) if accelerate and nf else None
-        x_it = np.ascontiguousarray(P[free])  # the current iterate (free vertices)
-        x_aa = np.empty((nf, 3))
+        g = np.empty((nf + nr, 3))
+        aa = Anderson(3 * (nf + nr), history) if accelerate and nf else None
+        x_it = np.empty((nf + nr, 3))  # the current iterate
+        x_it[:nf] = P[free]
+        if nr:
+            x_it[nf:] = be.R_cur.reshape(-1, 3)
+        x_aa = np.empty((nf + nr, 3))
         hist: list[float] = []
         converged = plain_next = False
         it = 0
@@ -376,10 +383,17 @@ class ImplicitEuler:
             accepted = False
             if nf:
                 be.rhs(fixed_rhs, rhs)
-                el.solve(rhs, g)  # g = G(x): one local/global step from x
+                el.solve(rhs, g[:nf])  # g = G(x): one local/global step from x
+                if nr:
+                    g[nf:] = be.R_rhs.reshape(-1, 3)
                 y_aa = aa.step(x_it, g, x_aa) if aa is not None else None
                 if y_aa is not None and not plain_next:
-                    be.scatter(x_aa, free, P)
+                    if nr:  # the extrapolated rotations, made rotations again
+                        Rq = nearest_rotations(x_aa[nf:].reshape(-1, 3, 3))
+                        x_aa[nf:] = Rq.reshape(-1, 3)
+                        be.scatter(x_aa[:nf], free, P, Rq)
+                    else:
+                        be.scatter(x_aa, free, P)
                     phi = objective()
                     # the safeguard: an extrapolation is kept only when it lowers Phi, so
                     # Phi still never rises
@@ -387,7 +401,7 @@ class ImplicitEuler:
                     if accepted:
                         x_it, x_aa = x_aa, x_it
                 if not accepted:
-                    be.scatter(g, free, P)
+                    be.scatter(g[:nf], free, P)
                     if aa is not None:
                         x_it, g = g, x_it
             if not accepted:

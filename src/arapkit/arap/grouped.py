@@ -319,10 +319,15 @@ class GroupedBackend:
             return self.inner.solve(rhs, out)
         return self._ps.elimination.solve(rhs, out)
 
-    def scatter(self, X: np.ndarray, idx: np.ndarray, P: np.ndarray) -> None:
-        """``P[idx] = X``, and every moving part placed about its centre."""
+    def scatter(self, X: np.ndarray, idx: np.ndarray, P: np.ndarray,
+                R: np.ndarray | None = None) -> None:
+        """``P[idx] = X``, and every moving part placed about its centre: with its rotation
+        of the last right-hand side, or ``R`` (rotations extrapolated with ``X``)."""
         ps = self._ps
-        if ps is not None and self._new_solve(P):
+        new = ps is not None and self._new_solve(P)
+        if R is not None:
+            self.R_rhs = np.array(R)
+        elif new:
             # a solve from rest: the loop solved before any local step, at the parts' rest
             # (free) and start (held) rotations
             self.R_rhs = ps.sync(P)

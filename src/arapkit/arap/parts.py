@@ -74,7 +74,7 @@ if TYPE_CHECKING:
     from .graph import EdgeGraph
 
 __all__ = ["FIXED", "FREE", "HINGE", "KINDS", "PART_TOL", "PIVOT", "PartHolds", "PartLayout",
-           "PartSystem", "hold_parts"]
+           "PartSystem", "hold_parts", "nearest_rotations"]
 
 #: how a part is held: by nothing, one handle, handles on a line, or three or more
 FREE, PIVOT, HINGE, FIXED = 0, 1, 2, 3
@@ -605,3 +605,18 @@ def _interior(layout: PartLayout, nbh, a: np.ndarray) -> tuple[np.ndarray, ...]:
         for c in range(3):
             Q[:, r, c] = np.bincount(local, av[:, r] * cv[:, c], len(owners))
     return owners, parts, Q
+
+
+def nearest_rotations(A: np.ndarray) -> np.ndarray:
+    """(k, 3, 3) the rotation nearest each of ``A`` (k, 3, 3) in the Frobenius norm: the
+    one maximising ``tr(R^T A) = tr(R A^T)`` (an extrapolated rotation made one again).
+
+    Examples
+    --------
+    >>> R = nearest_rotations(np.array([[[1.1, 0.1, 0], [-0.1, 0.9, 0], [0, 0, 1]]]))
+    >>> bool(np.allclose(R[0] @ R[0].T, np.eye(3))), round(float(np.linalg.det(R[0])), 12)
+    (True, 1.0)
+    """
+    out = np.empty_like(A)
+    fit_rotation_range(np.ascontiguousarray(A.transpose(0, 2, 1)), out, 0, len(A))
+    return out
