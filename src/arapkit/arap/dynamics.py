@@ -35,7 +35,9 @@ in the local step (the inertial term does not depend on R). A rigid part's verti
 exactly as the static solver (:mod:`arapkit.arap.parts`), the merged row's inertia being the
 part's mass (``b M`` enters the reduced system as a diagonal, and ``b M y`` its right-hand
 side); the local step fits ``R_P`` to the whole objective, turning a free part about its
-centre of mass, so each iteration keeps the step's linear momentum.
+centre of mass, so each iteration keeps the step's linear momentum. The part fit also turns
+the energy's rotations of the neighbourhoods inside the part (:mod:`arapkit.arap.parts`),
+and Anderson acceleration extrapolates the parts' rotations with the positions.
 
 Components without a handle are not held here (their mass keeps the system positive
 definite: a free body falls); a vertex without mass (one no triangle uses) has no motion of
