@@ -224,6 +224,29 @@ def test_shared_rotation_groups_fit_one_rotation_in_the_local_step(beam):
     assert 1e-6 < st < sp
 
 
+@pytest.mark.parametrize("energy", ["rring", "spokes-and-rims"])
+def test_touching_parts_mix_with_per_vertex_r_and_phi_never_rises(beam, energy):
+    """Two parts joined by edges (fitted one after the other) beside a stiffer r = 3 end:
+    both stay rigid and each step's objective falls at every iteration."""
+    m, left, _, _ = beam
+    V = m.vertices
+    a = np.flatnonzero((V[:, 0] > 1.0) & (V[:, 0] < 1.55))
+    b = np.flatnonzero((V[:, 0] > 1.55) & (V[:, 0] < 2.2))
+    g = VertexGroups.from_lists([("a", a, True), ("b", b, True)], m.n_vertices)
+    rings = np.where(V[:, 0] > 2.2, 3, 1) if energy == "rring" else 1
+    sim = Simulator(m, left, rings, energy=energy, dt=1 / 30, gravity=G, groups=g,
+                    stiffness=2e3)
+    assert sim.system.parts.layout.colour.tolist() == [0, 1]
+    for _ in range(12):
+        s = sim.step()
+        h = np.array(s.history)
+        assert s.converged and np.all(np.diff(h) <= 1e-12 * abs(h[0]))
+        for part in (a, b):
+            E = inner_edges(m, part)
+            assert np.abs(lengths(s.positions, E) - lengths(V, E)).max() < 1e-9
+    assert np.abs(sim.positions - V).max() > 0.05
+
+
 # --------------------------------------------------------------------- handles
 
 

@@ -403,7 +403,12 @@ class ImplicitEuler:
                     if accepted:
                         x_it, x_aa = x_aa, x_it
                 if not accepted:
-                    be.scatter(g[:nf], free, P)
+                    # with the rotations g was solved with (a refused extrapolation has
+                    # placed the parts with its own)
+                    if nr:
+                        be.scatter(g[:nf], free, P, g[nf:].reshape(-1, 3, 3))
+                    else:
+                        be.scatter(g, free, P)
                     if aa is not None:
                         x_it, g = g, x_it
             if not accepted:
