@@ -35,6 +35,14 @@ Examples
 ((31, 1154, 3), 1.0)
 >>> bool(traj.vertices[-1][:, 2].min() < -0.2)             # the free end sags
 True
+>>> from arapkit.mesh.groups import VertexGroups
+>>> tip = np.flatnonzero(m.vertices[:, 0] > 6)               # the last metre: rigid
+>>> g = VertexGroups.from_lists([("tip", tip, True)], m.n_vertices)
+>>> traj = simulate(m, 11, dt=1 / 30, handles=left, gravity=[0, 0, -9.81], groups=g)
+>>> d = traj.vertices[-1][tip] - traj.vertices[-1][tip[0]]
+>>> bool(np.allclose(np.linalg.norm(d, axis=1),
+...                  np.linalg.norm(m.vertices[tip] - m.vertices[tip[0]], axis=1), atol=1e-9))
+True
 """
 
 from __future__ import annotations
