@@ -177,51 +177,60 @@ def match_triangles(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_
            elem, d2, on_border)
 
 
+@nb.njit(cache=True, nogil=True, inline="always")
+def _disk_d2(x0, x1, x2, P, N, radius, j):
+    """Squared distance from x to disk j, and whether its closest point is on the rim."""
+    dx, dy, dz = x0 - P[j, 0], x1 - P[j, 1], x2 - P[j, 2]
+    h = dx * N[j, 0] + dy * N[j, 1] + dz * N[j, 2]
+    t2 = dx * dx + dy * dy + dz * dz - h * h  # squared distance within the disk's plane
+    r = radius[j]
+    if t2 > r * r:  # beyond the disk: the closest point is on its rim
+        e = np.sqrt(t2) - r
+        return h * h + e * e, True
+    return h * h, False
+
+
 @nb.njit(cache=True, nogil=True)
-def _disk_d2(X, i, P, N, radius, j, tmp):
-    dx, dy, dz = X[i, 0] - P[j, 0], X[i, 1] - P[j, 1], X[i, 2] - P[j, 2]
+def _disk_point(x0, x1, x2, P, N, radius, j, q, i):
+    """The closest point of disk j to x, into row i of q (for the match found only)."""
+    dx, dy, dz = x0 - P[j, 0], x1 - P[j, 1], x2 - P[j, 2]
     h = dx * N[j, 0] + dy * N[j, 1] + dz * N[j, 2]
     tx, ty, tz = dx - h * N[j, 0], dy - h * N[j, 1], dz - h * N[j, 2]
     t2 = tx * tx + ty * ty + tz * tz
-    rim = False
     r = radius[j]
-    if t2 > r * r:  # beyond the disk: the closest point is on its rim
+    if t2 > r * r:
         s = r / np.sqrt(t2)
         tx, ty, tz = tx * s, ty * s, tz * s
-        rim = True
-    tmp[0], tmp[1], tmp[2] = P[j, 0] + tx, P[j, 1] + ty, P[j, 2] + tz
-    ex, ey, ez = X[i, 0] - tmp[0], X[i, 1] - tmp[1], X[i, 2] - tmp[2]
-    return ex * ex + ey * ey + ez * ez, rim
+    q[i, 0], q[i, 1], q[i, 2] = P[j, 0] + tx, P[j, 1] + ty, P[j, 2] + tz
 
 
 @nb.njit(cache=True, nogil=True)
 def _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point, max_steps,
-                q, elem, d2, on_border, tmp):
+                q, elem, d2, on_border):
+    # distances only while searching: the closest point is made once, for the winner
+    x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
     best = np.inf
     bj = -1
     brim = False
-    bq0 = bq1 = bq2 = 0.0
     for t in range(start.shape[1] + 1):
         j = prev[i] if t == start.shape[1] else start[i, t]
         if j < 0:
             continue
-        dd, rim = _disk_d2(X, i, P, N, radius, j, tmp)
+        dd, rim = _disk_d2(x0, x1, x2, P, N, radius, j)
         if dd < best:
             best, bj, brim = dd, j, rim
-            bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
     for _ in range(max_steps):
         moved = False
         cur = bj
         for t in range(nbr_ptr[cur], nbr_ptr[cur + 1]):
             j = nbr_idx[t]
-            dd, rim = _disk_d2(X, i, P, N, radius, j, tmp)
+            dd, rim = _disk_d2(x0, x1, x2, P, N, radius, j)
             if dd < best:
                 best, bj, brim = dd, j, rim
-                bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
                 moved = True
         if not moved:
             break
-    q[i, 0], q[i, 1], q[i, 2] = bq0, bq1, bq2
+    _disk_point(x0, x1, x2, P, N, radius, bj, q, i)
     elem[i] = bj
     d2[i] = best
     on_border[i] = brim and border_point[bj]
@@ -232,16 +241,15 @@ def _match_disks_parallel(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border
                           max_steps, q, elem, d2, on_border):
     for i in nb.prange(X.shape[0]):
         _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
-                    max_steps, q, elem, d2, on_border, np.empty(3))
+                    max_steps, q, elem, d2, on_border)
 
 
 @nb.njit(cache=True, nogil=True)
 def _match_disks_serial(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
                         max_steps, q, elem, d2, on_border):
-    tmp = np.empty(3)
     for i in range(X.shape[0]):
         _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
-                    max_steps, q, elem, d2, on_border, tmp)
+                    max_steps, q, elem, d2, on_border)
 
 
 def match_disks(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point, max_steps,
