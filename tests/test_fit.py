@@ -246,6 +246,65 @@ def test_closest_points_on_disks_match_brute_force():
     assert (m.d2 >= brute - 1e-12).all()
     ratio = np.sqrt(m.d2 / brute)
     assert np.mean(ratio < 1 + 1e-9) > 0.8 and np.percentile(ratio, 99) < 1.05
+    # the point reported is the one measured, and lies on the disk of the element reported
+    assert np.allclose(((Q - m.point) ** 2).sum(axis=1), m.d2, rtol=1e-9, atol=1e-14)
+    off = m.point - t.points[m.element]
+    assert np.abs((off * t.normals[m.element]).sum(axis=1)).max() < 1e-12
+    assert (np.linalg.norm(off, axis=1) <= t.radius[m.element] * (1 + 1e-12)).all()
+
+
+def test_a_moved_target_keeps_its_tree_and_matches_as_one_built_there():
+    """``FitTarget.moved`` maps queries to the tree it has (built once per target): the
+    matches equal those of a target built from the moved points."""
+    rng = np.random.default_rng(8)
+    m = bar()
+    P, N = sample_surface(m.vertices, m.faces, 2000, rng)
+    t = FitTarget.from_points(P, N)
+    Q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    Q *= np.sign(np.linalg.det(Q))
+    s, tr = 2.5, np.array([0.3, -1.0, 2.0])
+    inner = t.moved(s, Q, tr).moved(0.5, Q.T, -tr)  # twice: the frames compose
+    assert inner.tree is t.tree
+    s2, R2, t2 = s * 0.5, Q @ Q.T, s * Q @ -tr + tr
+    P2 = (((P - tr) @ Q / s) + tr) @ Q.T / 0.5
+    assert np.allclose(inner.points, P2) and np.allclose(s2 * P2 @ R2.T + t2, P)
+    fresh = FitTarget.from_points(P2, N @ Q @ Q.T)
+    X = P2[rng.integers(0, len(P2), 300)] + rng.normal(0, 0.1, (300, 3))
+    a, b = inner.match(X), fresh.match(X)
+    assert np.allclose(a.d2, b.d2, rtol=1e-9, atol=1e-14)
+    d, i = inner.nearest(X, 1)
+    brute = np.linalg.norm(X[:, None] - P2[None], axis=2)
+    assert np.allclose(d, brute.min(axis=1)) and (i == brute.argmin(axis=1)).all()
+
+
+def test_overlap_is_decided_as_by_counting_every_vertex():
+    """The overlap test asks a stride of the vertices first; its decision is the count of
+    all: a small cloud off the bar's end, placed where just enough (at least 1 % of the
+    vertices) or just too few lie within reach, is fitted or refused as brute force says,
+    and the message counts every vertex near it."""
+    m = bar()
+    V = m.vertices
+    fitter = Fitter(m)
+    need = max(3, 0.01 * len(V))
+    corner = np.random.default_rng(9).random((8, 3)) * 1e-3
+    seen = set()
+    for gap in np.linspace(0.3, 0.7, 81):
+        cloud = corner + [-gap, 0.0, 0.0]
+        reach = 0.1 * max(np.linalg.norm(np.ptp(cloud, axis=0)),
+                          np.linalg.norm(np.ptp(V, axis=0)))
+        count = int((np.linalg.norm(V[:, None] - cloud[None], axis=2).min(axis=1)
+                     <= reach).sum())
+        if not need - 10 <= count < need + 10:
+            continue
+        refused = count < need
+        seen.add(refused)
+        target = FitTarget.from_points(cloud)
+        if refused:
+            with pytest.raises(InputError, match=f"only {count} of {len(V)} vertices"):
+                fitter._check_overlap(target, (1.0, np.eye(3), np.zeros(3)))
+        else:
+            fitter._check_overlap(target, (1.0, np.eye(3), np.zeros(3)))
+    assert seen == {True, False}
 
 
 def test_similarity_recovers_a_known_transform():
