@@ -343,8 +343,9 @@ class Fitter:
         rep = StageReport("rigid", None, 0)
         near = 0.5 * self.template.mean_edge_length
         acc = np.zeros(len(V), dtype=bool)
+        memo = tgt.memo(len(V))
         for it in range(RIGID_ITER):
-            m = tgt.match(s * V @ R.T + t, prev, search=prev is None)
+            m = tgt.match(s * V @ R.T + t, prev, search=prev is None, memo=memo)
             prev = m.element
             if it == 0:
                 elig = eligible(m, normals @ R.T, tgt.oriented, near)

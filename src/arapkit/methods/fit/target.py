@@ -34,7 +34,7 @@ from ...mesh.model import Mesh, faces_of
 from ...validate import real_array
 from .closest import PARALLEL_QUERIES, boundary_points, match_disks, match_triangles
 
-__all__ = ["FitTarget", "Matches", "as_points"]
+__all__ = ["FitTarget", "Matches", "WalkMemo", "as_points"]
 
 #: neighbours of a cloud point: for its normal, its disk's radius and the walk's graph
 NORMAL_NEIGHBOURS = 10
@@ -65,6 +65,24 @@ class Matches(NamedTuple):
     d2: np.ndarray
     border: np.ndarray
     normal: np.ndarray
+
+
+class WalkMemo(NamedTuple):
+    """What the closest-point walk remembers of each query between calls, so that a query
+    that has hardly moved skips a walk that would stay where it is (see
+    :func:`arapkit.methods.fit.closest.match_disks`). Make it with :meth:`FitTarget.memo`
+    and pass it to every :meth:`FitTarget.match` of the same queries.
+
+    Attributes
+    ----------
+    anchor : (n, 3) where each query last settled.
+    slack : (n,) how much farther than its element every neighbour was there.
+    owner : (n,) that element (-1: nothing remembered).
+    """
+
+    anchor: np.ndarray
+    slack: np.ndarray
+    owner: np.ndarray
 
 
 def as_points(values, what: str) -> np.ndarray:
@@ -260,13 +278,20 @@ class FitTarget:
                                workers=_workers(len(X)))
         return d / scale, i
 
+    @staticmethod
+    def memo(n: int) -> WalkMemo:
+        """An empty :class:`WalkMemo` for ``n`` queries."""
+        return WalkMemo(np.zeros((n, 3)), np.zeros(n), np.full(n, -1, dtype=np.int64))
+
     def match(self, X: np.ndarray, prev: np.ndarray | None = None, *,
-              search: bool = True) -> Matches:
+              search: bool = True, memo: WalkMemo | None = None) -> Matches:
         """Closest points of the rows of ``X`` on the surface.
 
         ``prev`` (one element per row, -1 for none) is always a candidate, so no row gets a
         farther point than its last match; ``search`` adds a k-d tree search (without it
-        only the walk from ``prev`` runs).
+        only the walk from ``prev`` runs). ``memo`` (:meth:`memo`, kept by the caller
+        across calls for the same queries) skips the walks that would not move: the same
+        matches, faster.
         """
         X = np.ascontiguousarray(X, dtype=np.float64)
         n = len(X)
@@ -276,16 +301,19 @@ class FitTarget:
             start = self.nearest(X, k)[1].reshape(n, k).astype(np.int64)
         else:
             start = np.zeros((n, 0), dtype=np.int64)
+        if memo is None or len(memo.owner) != n:
+            memo = self.memo(n)
         q = np.empty((n, 3))
         elem = np.empty(n, dtype=np.int64)
         d2 = np.empty(n)
         border = np.empty(n, dtype=bool)
         if self.kind == "mesh":
             match_triangles(X, self.points, self.faces, self.nbr_ptr, self.nbr_idx, start,
-                            prev, self.border_edge, self.border, MAX_WALK, q, elem, d2, border)
+                            prev, self.border_edge, self.border, MAX_WALK, q, elem, d2, border,
+                            *memo)
         else:
             match_disks(X, self.points, self.normals, self.radius, self.nbr_ptr, self.nbr_idx,
-                        start, prev, self.border, MAX_WALK, q, elem, d2, border)
+                        start, prev, self.border, MAX_WALK, q, elem, d2, border, *memo)
         return Matches(q, elem, d2, border, self.normals[elem])
 
     def moved(self, scale: float, R: np.ndarray, t: np.ndarray) -> FitTarget:
