@@ -250,15 +250,19 @@ class Fitter:
         s0, R0, t0 = T
         inner = tgt.moved(s0 * unit, R0, t0)  # the target in the template's frame and units
         L_tf = (lt - t0) @ R0 / s0  # the landmarks' targets in the template's frame
-        X = V
+        X, found = V, None
         if len(lv):
-            X = self._bend(lv, L_tf, T, fit_scale, inner, stages, timings)
+            X, found = self._bend(lv, L_tf, T, fit_scale, inner, stages, timings)
         system = self._system(lv)
         f0, fs0 = system.factorisations, system.factor_s
         loop = StageLoop(self.backend, system, inner, np.ascontiguousarray(X[p.perm] / unit),
                          L_tf / unit, self.weights, self.rest_normals,
                          p.energy.rest_term, self.diagonal, self.edge, fit_scale,
                          self.accelerate, self.tol, self.stage_iter, timings)
+        if found is not None:
+            # the bend's matches were searched at these very positions: the first stage walks
+            # from them instead of searching again (the same matches)
+            loop.prev = found[p.perm]
         stages += loop.run(self.schedule)
         timings["factorisation"] = system.factor_s - fs0
         out = s0 * (loop.P[p.iperm] * unit) @ R0.T + t0
@@ -280,8 +284,9 @@ class Fitter:
         return FitResult(out, residuals, matched, report, T, self.template)
 
     def _bend(self, lv, L_tf, T: Similarity, fit_scale: bool, inner: FitTarget, stages,
-              timings) -> np.ndarray:
-        """The template bent onto its landmarks by ARAP (template frame).
+              timings) -> tuple[np.ndarray, np.ndarray]:
+        """The template bent onto its landmarks by ARAP (template frame), and the target
+        elements its vertices are closest to.
 
         ARAP with a few point handles has several minima, and the one the local/global
         iteration finds depends on its start. Two starts are tried: the template placed by
@@ -302,18 +307,18 @@ class Fitter:
             if np.sqrt(((here - V) ** 2).sum(axis=1).mean()) > 0.01 * self.diagonal * \
                     self.problem.scale:
                 starts.append(here)
-        best, best_d = None, np.inf
+        best, best_d, found = None, np.inf, None
         cap = (0.05 * self.diagonal * self.problem.scale) ** 2
         for start in starts:
             res = arap_solve(problem, L_tf, init=start, accelerate=True, max_iter=LANDMARK_ITER)
-            d = float(np.minimum(inner.match(res.vertices / self.problem.scale).d2
-                                 * self.problem.scale ** 2, cap).mean())
+            m = inner.match(res.vertices / self.problem.scale)
+            d = float(np.minimum(m.d2 * self.problem.scale ** 2, cap).mean())
             if d < best_d:
-                best, best_d = res, d
+                best, best_d, found = res, d, m.element
         timings["landmarks"] = time.perf_counter() - t1
         stages.append(StageReport("landmarks", None, best.iterations, list(best.history),
                                   time_s=timings["landmarks"]))
-        return best.vertices
+        return best.vertices, found
 
     def _fits_scale(self, lv: np.ndarray, lt: np.ndarray) -> bool:
         """Whether this fit fits the template's size (see ``scale``)."""
