@@ -310,7 +310,9 @@ class Fitter:
         best, best_d, found = None, np.inf, None
         cap = (0.05 * self.diagonal * self.problem.scale) ** 2
         for start in starts:
-            res = arap_solve(problem, L_tf, init=start, accelerate=True, max_iter=LANDMARK_ITER)
+            # the Fitter's backend (the same energy): not another one built per solve
+            res = arap_solve(problem, L_tf, init=start, backend=self.backend, accelerate=True,
+                             max_iter=LANDMARK_ITER)
             m = inner.match(res.vertices / self.problem.scale)
             d = float(np.minimum(m.d2 * self.problem.scale ** 2, cap).mean())
             if d < best_d:
