@@ -183,6 +183,37 @@ def test_energy_never_rises_within_a_stage(bent):
         assert sum(len(s.energy) for s in stages) > 20
 
 
+def test_first_stage_reuses_the_bends_matches_and_changes_nothing(bent, monkeypatch):
+    """The first stage walks from the landmark bend's matches (searched at the same
+    positions) instead of searching again: the fit is the same to the last bit as with
+    the search, and it makes one k-d search fewer."""
+    m, h, G, _ = bent
+    rng = np.random.default_rng(11)
+    P, N = sample_surface(G, m.faces, 3000, rng, noise=0.002, missing=0.3)
+    lm = (h[::7], G[h[::7]])
+    searches = []
+    original = FitTarget.nearest
+
+    def counted(self, X, k=1, distance_upper_bound=np.inf):
+        if k > 1:
+            searches.append(len(X))
+        return original(self, X, k, distance_upper_bound)
+
+    monkeypatch.setattr(FitTarget, "nearest", counted)
+    reused = Fitter(m).fit(P, lm, normals=N)
+    n_reused = len(searches)
+    bend = Fitter._bend
+
+    def forgetful(self, *args):  # the bend's vertices without its matches: a new search
+        return bend(self, *args)[0], None
+
+    monkeypatch.setattr(Fitter, "_bend", forgetful)
+    searches.clear()
+    searched = Fitter(m).fit(P, lm, normals=N)
+    assert np.array_equal(reused.vertices, searched.vertices)
+    assert len(searches) == n_reused + 1
+
+
 def test_factors_are_kept_across_fits(bent):
     """One factorisation per stage on the first fit of a landmark set, none after."""
     m, h, G, _ = bent
