@@ -41,6 +41,7 @@ from .io import (
     select_sphere,
 )
 from .learn.fit import LearnedRings, learn_rings
+from .mesh.cloud import Graph, PointCloud
 from .mesh.model import Mesh
 from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .methods.deformer import Deformer, Result
@@ -69,9 +70,11 @@ __all__ = [
     "HandleGroup",
     "HandleSet",
     "InputError",
+    "Graph",
     "LaplacianEditor",
     "LearnedRings",
     "Mesh",
+    "PointCloud",
     "Result",
     "Simulator",
     "UpGuess",

@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import Advice, InputError
+from ..mesh.cloud import as_shape
 from ..mesh.weights import SOUND_WEIGHTS
 from .constraints import (
     Elimination,
@@ -36,11 +37,13 @@ from .constraints import (
     check_handles,
     return_free_memory,
 )
+from .domains import domain_of
 from .energies import energy_info, make_energy
 from .graph import EdgeGraph, bandwidth_order, check_graph, unit_scale
 from .rings import check_rings
 
 if TYPE_CHECKING:
+    from ..mesh.cloud import PointCloud
     from ..mesh.model import Mesh
     from .energies.base import NeighbourhoodEnergy
 
@@ -90,21 +93,26 @@ class ARAPProblem:
 
     # -- construction --------------------------------------------------------------
     @classmethod
-    def from_mesh(cls, mesh: Mesh, handles, energy="rring", weights: str | None = None, *,
-                  rings=1, free_components: str = "follow", reorder: bool = True,
-                  **energy_options) -> ARAPProblem:
-        """Precompute ARAP on a triangle mesh.
+    def from_mesh(cls, mesh: Mesh | PointCloud, handles, energy="rring",
+                  weights: str | None = None, *, rings=1, free_components: str = "follow",
+                  reorder: bool = True, **energy_options) -> ARAPProblem:
+        """Precompute ARAP on a triangle mesh or a point cloud's graph.
 
         Parameters
         ----------
-        mesh : Mesh
+        mesh : Mesh or PointCloud
+            The shape (its domain, :func:`arapkit.arap.domains.domain_of`, says how its
+            edge graph and weights are made).
         handles : (h,) int
             Constrained vertices.
         energy : str
             A registered energy of the local/global solver
-            (:func:`arapkit.arap.energies.energy_names`).
-        weights : str, optional
-            Edge weighting (default :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`).
+            (:func:`arapkit.arap.energies.energy_names`); one defined on triangles is
+            refused on a point cloud.
+        weights : str or (m,) array, optional
+            Edge weighting: a kind of the shape's domain (default: the domain's own,
+            ``cotan-clamped`` on a mesh and ``gaussian`` on a point cloud), or one weight
+            per edge.
         rings : int or (n,) int
             r per vertex for ``energy="rring"``.
         free_components, reorder :
@@ -118,17 +126,15 @@ class ARAPProblem:
         >>> p = ARAPProblem.from_mesh(bar(), [0, 1], rings=2)
         >>> p.n_vertices, p.energy.name
         (1154, 'rring')
+        >>> from arapkit.mesh.cloud import PointCloud
+        >>> ARAPProblem.from_mesh(PointCloud(bar().vertices), [0, 1]).weights_kind
+        'gaussian'
         """
-        from ..mesh.model import as_mesh
-        from ..mesh.weights import DEFAULT_WEIGHTS, edge_weights
-
         t0 = time.perf_counter()
-        mesh = as_mesh(mesh)
-        kind = DEFAULT_WEIGHTS if weights is None else weights
-        w = edge_weights(mesh, kind)
-        if not isinstance(kind, str):  # explicit per-edge weights: no kind to name
-            kind = None
-        return cls._build(EdgeGraph.from_mesh(mesh), w, kind, handles, energy, rings,
+        shape = as_shape(mesh)
+        dom = domain_of(shape)
+        w, kind = dom.edge_weights(shape, weights)
+        return cls._build(dom.graph(shape), w, kind, handles, energy, rings,
                           free_components, reorder, energy_options, t0)
 
     @classmethod

@@ -37,6 +37,7 @@ import numpy as np
 
 from ..arap.backends import DEVICES, check_device, make_backend  # noqa: F401 - DEVICES: what device= takes
 from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
+from ..arap.domains import domain_of
 from ..arap.energies import energy_info
 from ..arap.energies.rring import check_ring_scale
 from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
@@ -45,13 +46,15 @@ from ..arap.loop import Result, local_global, start_energy, with_progress
 from ..arap.problem import ARAPProblem
 from ..arap.rings import Neighbourhoods, check_rings
 from ..errors import Advice, InputError
-from ..mesh.model import Mesh, as_mesh
-from ..mesh.weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
+from ..mesh.cloud import PointCloud, as_shape
+from ..mesh.model import Mesh
+from ..mesh.weights import SOUND_WEIGHTS
 from ..validate import integer, iteration_cap, real_array, tolerance
 from .registry import INTERFACES, MethodInfo, MethodOption, method, method_names, methods, register
 
 __all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
-           "bandwidth_order", "check_method", "coarse_to_fine", "register_variant", "unit_scale"]
+           "bandwidth_order", "check_domain", "check_method", "coarse_to_fine",
+           "register_variant", "unit_scale"]
 
 INITS = ("identity", "laplacian")
 #: ``multires=None`` (the default) solves coarse to fine from this many vertices: below it
@@ -68,7 +71,7 @@ def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
     en = energy_info(name)
     return MethodInfo(name, label, local_global=True, descent=en.descent,
                       rigidity_map=en.rigidity_map, accelerate=en.descent,
-                      multires=en.descent, **kw)
+                      multires=en.descent, needs_faces=en.faces_needed({}), **kw)
 
 
 register(_local_global_method("rring", "r-ring ARAP", volumetric=True))
@@ -105,6 +108,36 @@ def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None) -> dict:
                for name, opt in info.options.items()}
     # an option without a default is left out unless given
     return {key: value for key, value in options.items() if value is not None}
+
+
+def check_domain(shape, energy: str = "rring", *, volumetric: bool = False,
+                 init="identity") -> None:
+    """Refuse, in one line, what ``shape``'s domain cannot do: a method defined on
+    triangles (the registry's ``needs_faces``), a volume or a Laplacian start on a point
+    cloud.
+
+    Examples
+    --------
+    >>> from arapkit.mesh.cloud import PointCloud
+    >>> check_domain(PointCloud(np.eye(3), name="c.ply"), "sr-arap")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: c.ply: energy 'sr-arap' needs a triangle mesh and c.ply is ...
+    """
+    dom = domain_of(shape)
+    if dom.has_faces:
+        return
+    name = shape.name
+    if energy in method_names() and not method(energy).applies_to(False):
+        fits = [m.name for m in methods("library") if m.applies_to(False)]
+        raise InputError(f"{name}: energy '{energy}' needs a triangle mesh and {name} is a "
+                         f"{dom.label} (methods for point clouds: {', '.join(fits)})")
+    if volumetric:
+        raise InputError(f"{name}: volumetric=True fills a closed triangle surface; {name} "
+                         f"is a {dom.label}")
+    if isinstance(init, str) and init == "laplacian":
+        raise InputError(f"{name}: init='laplacian' (Laplacian editing) needs a triangle "
+                         f"mesh; {name} is a {dom.label}")
 
 
 def _refuse_acceleration(info: MethodInfo, remedy: str = "") -> None:
@@ -186,16 +219,23 @@ class Deformer:
 
     Parameters
     ----------
-    mesh : Mesh, a (vertices, faces) pair, or a trimesh.Trimesh
-        The surface (:func:`arapkit.mesh.model.as_mesh`).
+    mesh : Mesh, PointCloud, Graph, a (vertices, faces) pair, a trimesh.Trimesh, or points
+        The shape (:func:`arapkit.mesh.cloud.as_shape`): a triangle mesh, or a point cloud
+        (an :class:`arapkit.PointCloud`, an ``(n, 3)`` array, an Open3D or trimesh point
+        cloud) solved on its neighbourhood graph, or an :class:`arapkit.Graph` of your
+        own edges. Methods defined on triangles refuse a point cloud (``docs/clouds.md``).
     handles : (h,) int, (n,) bool, or a HandleSet
         Vertices with positional constraints (a mask selects its True vertices; a
         :func:`arapkit.load_handles` set stands for its indices).
     rings : int or (n,) int
         Neighbourhood size r per vertex (1 = standard ARAP; larger = stiffer). Only for
         ``energy="rring"``.
-    weights : {"cotan", "cotan-clamped", "cotan-clamped-each", "uniform"}
-        Edge weights (see :mod:`arapkit.mesh.weights`).
+    weights : str or (m,) array, optional
+        Edge weights. On a mesh ``"cotan"``, ``"cotan-clamped"`` (the default),
+        ``"cotan-clamped-each"`` or ``"uniform"`` (:mod:`arapkit.mesh.weights`); on a point
+        cloud ``"gaussian"`` (the default), ``"uniform"`` or ``"laplacian"``
+        (:mod:`arapkit.mesh.cloud_weights`); or one positive weight per edge. None: the
+        shape's default (a :class:`arapkit.Graph`'s own weights where it has them).
     energy : {"rring", "spokes-and-rims", "sr-arap", "embedded"}
         The method (see ``docs/methods.md``): r-ring ARAP (Chen et al. 2017),
         spokes-and-rims ARAP (Chao et al. 2010), smooth-rotation ARAP (Levi & Gotsman
@@ -282,11 +322,13 @@ class Deformer:
     True
     """
 
-    def __new__(cls, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
-                volumetric: bool = False, density: float | None = None,
+    def __new__(cls, mesh: Mesh | PointCloud, handles, rings=1, weights: str | None = None,
+                *, volumetric: bool = False, density: float | None = None,
                 multires: bool | None = None, proxy_vertices: int | None = None,
                 levels=None, **options):
-        mesh = as_mesh(mesh)
+        mesh = as_shape(mesh)
+        check_domain(mesh, options.get("energy", "rring"), volumetric=volumetric,
+                     init=options.get("init", "identity"))
         if not volumetric:
             if density is not None:
                 raise InputError("density is an option of volumetric=True")
@@ -318,10 +360,10 @@ class Deformer:
 
     def __init__(
         self,
-        mesh: Mesh,
+        mesh: Mesh | PointCloud,
         handles,
         rings=1,
-        weights: str = DEFAULT_WEIGHTS,
+        weights: str | None = None,
         *,
         volumetric: bool = False,
         density: float | None = None,
@@ -350,10 +392,11 @@ class Deformer:
             if not info.rigidity_map:
                 raise InputError(f"ring_scale: energy '{energy}' has no rigidity map")
             options["ring_scale"] = self.ring_scale
-        mesh = self.__dict__.pop("_checked_mesh", None) or as_mesh(mesh)
+        mesh = self.__dict__.pop("_checked_mesh", None) or as_shape(mesh)
         self.mesh = mesh
         self.energy = energy
-        self.weights_kind = weights
+        # None: the shape's domain's own (cotan-clamped on a mesh, gaussian on a cloud)
+        self.weights_kind = domain_of(mesh).default_weights if weights is None else weights
         self.tol = tolerance(tol)
         self.max_iter = iteration_cap(max_iter)
         if init not in INITS:
@@ -380,6 +423,8 @@ class Deformer:
         self.problem = ARAPProblem.from_mesh(
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
             reorder=reorder, **options)
+        if self.problem.weights_kind is not None:
+            self.weights_kind = self.problem.weights_kind
         self._rings = self.problem.energy.rings[self.problem.iperm]
         if sr_roi is not None:
             _check_outside_roi_is_held(mesh, sr_roi, handles)
@@ -574,6 +619,7 @@ class Deformer:
             raise InputError(f"unknown init '{mode}' (use {' or '.join(INITS)})")
         if mode == "identity":
             return None
+        check_domain(self.mesh, init=mode)
         # embedded deformation has no problem: its constrained vertices are the handles
         p = self.problem
         if self._laplacian_editor is None:

@@ -81,6 +81,9 @@ class MethodInfo:
     multires : bool
         Can be solved coarse to fine on a decimated proxy (``multires=True``,
         :mod:`arapkit.methods.multires`): a local/global descent method.
+    needs_faces : bool
+        Defined on triangles: refused on a point cloud or graph (a shape whose domain,
+        :func:`arapkit.arap.domains.domain_of`, has no faces), in every door.
     handle_tol : float
         How far a handle may end from its target, relative to the bounding-box diagonal:
         0 for hard constraints (eliminated, met to round-off), the soft constraints'
@@ -102,10 +105,21 @@ class MethodInfo:
     accelerate: bool = False
     volumetric: bool = False
     multires: bool = False
+    needs_faces: bool = False
     handle_tol: float = 0.0
     options: dict[str, MethodOption] = field(default_factory=dict, hash=False)
     interfaces: frozenset[str] = field(default_factory=lambda: frozenset(INTERFACES))
     why_not: dict[str, str] = field(default_factory=dict, hash=False, compare=False)
+
+    def applies_to(self, has_faces: bool) -> bool:
+        """Whether the method runs on a shape with (or without) triangles.
+
+        Examples
+        --------
+        >>> method("spokes-and-rims").applies_to(False), method("rring").applies_to(False)
+        (False, True)
+        """
+        return has_faces or not self.needs_faces
 
     @property
     def exact_handles(self) -> bool:

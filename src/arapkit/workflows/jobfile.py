@@ -23,8 +23,8 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from ..arap.domains import all_weight_kinds
 from ..errors import InputError
-from ..mesh.weights import WEIGHT_KINDS
 from ..methods.deformer import INITS, check_method
 from ..validate import iteration_cap, read_input, ring_size, tolerance
 from .jobs import (
@@ -156,8 +156,9 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
         raise InputError(f"{where}: give 'rings' or 'rings_file', not both")
     # the rules of the library's own parameters (arapkit.validate), with the job's location
     job["rings"] = ring_size(job["rings"], f"{where}: 'rings'")
-    if job["weights"] not in WEIGHT_KINDS:
-        raise InputError(f"{where}: 'weights' must be one of {', '.join(WEIGHT_KINDS)}, "
+    # null: the shape's own default (cotan-clamped on a mesh, gaussian on a point cloud)
+    if job["weights"] is not None and job["weights"] not in all_weight_kinds():
+        raise InputError(f"{where}: 'weights' must be one of {', '.join(all_weight_kinds())}, "
                          f"got {json.dumps(job['weights'])}")
     _check_method(job, where)
     job["weld"] = _check_weld(job["weld"], where)

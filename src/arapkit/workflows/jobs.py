@@ -36,13 +36,14 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
+from ..arap.domains import domain_of
 from ..errors import Advice, InputError, worded_for
 from ..methods.deformer import Deformer
 from ..methods.registry import method_names
 
 __all__ = ["DEFAULT_ENERGY", "ENERGIES", "JOB_DEFAULTS", "DeformJob", "JobInputs", "PreparedJob",
            "describe_groups", "describe_rings", "error_message", "job_report", "load_job_inputs",
-           "method_description", "prepare_job", "save_result"]
+           "method_description", "prepare_job", "save_result", "weights_used"]
 
 
 def _solver_defaults() -> dict[str, Any]:
@@ -80,7 +81,8 @@ class DeformJob:
     rings_file : str or None
         Per-vertex ring sizes (see :func:`arapkit.io.rigidity.load_rings`).
     weights, tol, max_iter, init, accelerate
-        As for :class:`arapkit.Deformer`.
+        As for :class:`arapkit.Deformer` (``weights`` None: the shape's default,
+        ``cotan-clamped`` on a mesh and ``gaussian`` on a point cloud).
     energy : str
         One of :data:`ENERGIES`.
     sr_alpha, nodes : optional
@@ -99,7 +101,7 @@ class DeformJob:
     transform: str | None = None
     rings: int = _SOLVER["rings"]
     rings_file: str | None = None
-    weights: str = _SOLVER["weights"]
+    weights: str | None = _SOLVER["weights"]
     tol: float = _SOLVER["tol"]
     max_iter: int = _SOLVER["max_iter"]
     init: str = _SOLVER["init"]
@@ -277,6 +279,15 @@ def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[s
     )
 
 
+def weights_used(job: DeformJob, prepared: PreparedJob) -> str | None:
+    """The edge weighting the job's solve used: as given, else the shape's default
+    (``cotan-clamped`` on a mesh, ``gaussian`` on a point cloud)."""
+    kind = getattr(prepared.deformer, "weights_kind", None)
+    if kind is None:
+        kind = job.weights if job.weights is not None else domain_of(prepared.mesh).default_weights
+    return kind if isinstance(kind, str) else None
+
+
 def _volume_parameters(job: DeformJob) -> dict[str, Any]:
     """Report parameters of a volumetric job (none for surface ARAP)."""
     if not job.volumetric:
@@ -338,7 +349,7 @@ def job_report(
         "method": method_description(job),
         "parameters": {
             "rings": int(job.rings) if not job.rings_file else rings_summary(r),
-            "weights": job.weights,
+            "weights": weights_used(job, prepared),
             "tol": job.tol,
             "max_iter": job.max_iter,
             "init": job.init,
