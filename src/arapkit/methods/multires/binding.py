@@ -22,6 +22,7 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
+from ...arap.energies.rring import ring_blend
 from ...mesh.model import Mesh
 
 __all__ = ["SKIN_NEIGHBOURS", "Binding", "full_tree_of", "proxy_rings"]
@@ -148,7 +149,8 @@ class Binding:
     def between(cls, full: np.ndarray, proxy: np.ndarray,
                 full_tree: cKDTree | None = None, left_out: np.ndarray | None = None,
                 home: np.ndarray | None = None,
-                proxy_faces: np.ndarray | None = None) -> Binding:
+                proxy_faces: np.ndarray | None = None,
+                proxy_adjacency=None) -> Binding:
         """Bind ``full`` (n, 3) rest positions to ``proxy`` (m, 3) ones.
 
         ``full_tree``: :func:`full_tree_of` ``full``, when made beforehand; ``left_out``:
@@ -172,7 +174,8 @@ class Binding:
         if home is None:
             ptr, nbr = np.zeros(m + 1, dtype=np.int64), np.zeros(0, dtype=np.int32)
         else:
-            adj = Mesh(proxy, proxy_faces).adjacency
+            adj = (Mesh(proxy, proxy_faces).adjacency if proxy_adjacency is None
+                   else proxy_adjacency.tocsr())
             ptr, nbr = adj.indptr.astype(np.int64), adj.indices.astype(np.int32)
         near = np.empty((n, k), dtype=np.int32)
         weights = np.empty((n, k), dtype=np.float32)
@@ -219,17 +222,23 @@ class Binding:
         return out
 
 
-def proxy_rings(rings: np.ndarray, near_full: np.ndarray) -> np.ndarray:
+def proxy_rings(rings: np.ndarray, near_full: np.ndarray,
+                counted_at: float | None = None) -> np.ndarray:
     """The proxy's rigidity map: the full r where each proxy vertex is bound.
 
     The proxy counts these r in the full mesh's rings (its solver's ``ring_scale`` is
     ``h_full / h_proxy``), so that it is as stiff as the full mesh
-    (:mod:`arapkit.arap.energies.rring`).
+    (:mod:`arapkit.arap.energies.rring`). A proxy without triangles (a point cloud's)
+    takes ``counted_at = h_full / h_proxy`` instead: r counted at its own scale,
+    ``max(1, rint(r s))`` (:func:`~arapkit.arap.energies.rring.ring_blend`).
 
     Examples
     --------
     >>> import numpy as np
     >>> proxy_rings(np.array([1, 5, 9]), np.array([2, 0])).tolist()
     [9, 1]
+    >>> proxy_rings(np.array([1, 5, 9]), np.array([2, 0]), 0.25).tolist()
+    [2, 1]
     """
-    return np.asarray(rings, dtype=np.int32)[near_full]
+    r = np.asarray(rings, dtype=np.int32)[near_full]
+    return r if counted_at is None else ring_blend(r, counted_at)[0]
