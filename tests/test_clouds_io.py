@@ -163,12 +163,15 @@ def test_writing_back_keeps_every_value_and_turns_the_normals(files, tmp_path, s
         assert np.allclose(v["energy"], res.vertex_energy)
 
 
-def test_positions_alone_write_the_normals_as_they_were_and_say_so(files, tmp_path):
+def test_positions_alone_turn_the_normals_by_fitted_rotations(files, tmp_path):
+    """Without a solve's rotations, each normal turns by the rotation fitted to its point's
+    neighbourhood: a rigid motion of the points turns them exactly."""
+    from scipy.spatial.transform import Rotation
+
     c = load_points(files["xyzn"])
-    warn = save_mesh(tmp_path / "o.xyzn", c.points + 1.0, like=c)
-    assert warn == ["o.xyzn: normals were written as they were (pass the solve's Result "
-                    "to turn them)"]
-    assert np.abs(load_points(tmp_path / "o.xyzn").normals - NRM).max() < 1e-12
+    R = Rotation.from_rotvec([0.3, -1.2, 0.5]).as_matrix()
+    assert save_mesh(tmp_path / "o.xyzn", c.points @ R.T + 2.0, like=c) == []
+    assert np.abs(load_points(tmp_path / "o.xyzn").normals - NRM @ R.T).max() < 1e-12
 
 
 def test_formats_without_room_say_what_they_drop(files, tmp_path):

@@ -17,9 +17,11 @@ from typing import Any
 
 import numpy as np
 
+from arapkit.arap.domains import all_weight_kinds
 from arapkit.cli.common import (
     Progress,
     add_example_epilog,
+    add_graph_options,
     add_view_options,
     add_weld_option,
     iteration_cap,
@@ -30,7 +32,8 @@ from arapkit.cli.common import (
     warn,
 )
 from arapkit.errors import InputError, require_extra, worded_for
-from arapkit.io.formats import readable_formats
+from arapkit.io.clouds import shape_formats_text
+from arapkit.mesh.cloud_weights import CLOUD_WEIGHT_KINDS, DEFAULT_CLOUD_WEIGHTS
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
@@ -57,7 +60,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "stdout; progress and notes go to stderr.",
         **add_example_epilog(EXAMPLES),
     )
-    p.add_argument("mesh", metavar="MESH", help=f"input mesh ({readable_formats()}; may be .gz)")
+    p.add_argument("mesh", metavar="MESH",
+                   help=f"input mesh or point cloud ({shape_formats_text()}; text formats "
+                   "may be .gz); a file without faces is a point cloud (docs/clouds.md)")
     p.add_argument(
         "--handles",
         "-H",
@@ -86,13 +91,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         metavar="FILE",
         help="per-vertex r: text (one integer per line), .npy, or PLY vertex property 'rings'",
     )
-    kinds = WEIGHT_KINDS
     p.add_argument(
         "--weights",
-        default=DEFAULT_WEIGHTS,
-        choices=kinds,
-        help=f"edge weights: {', '.join(kinds)} (default {DEFAULT_WEIGHTS})",
+        default=None,
+        choices=all_weight_kinds(),
+        help=f"edge weights: on a mesh {', '.join(WEIGHT_KINDS)} (default {DEFAULT_WEIGHTS}); "
+        f"on a point cloud {', '.join(CLOUD_WEIGHT_KINDS)} (default {DEFAULT_CLOUD_WEIGHTS})",
     )
+    add_graph_options(p)
     p.add_argument(
         "--energy",
         default="rring",
@@ -233,7 +239,8 @@ def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Fail fast, before loading or solving, on any output that cannot be written."""
-    from arapkit.io import check_figure_format, check_output_path, mesh_format
+    from arapkit.io import check_figure_format, check_output_path
+    from arapkit.io.clouds import check_shape_output
 
     inputs = [args.mesh, args.handles, args.transform, args.rings_file]
     outs = []
@@ -241,7 +248,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         raise InputError("-o/--output OUT is required (only --dry-run writes no mesh)")
     if args.output is not None:
         check_output_path(args.output, inputs, args.force, "output")
-        mesh_format(args.output)
+        check_shape_output(args.output, args.mesh)
         outs.append(Path(args.output).resolve())
     if args.report and args.report != "-":
         check_output_path(args.report, inputs, args.force, "report")
@@ -274,6 +281,8 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
         max_iter=args.max_iter,
         init=args.init,
         weld=getattr(args, "weld", None),
+        neighbours=args.neighbours,
+        radius=args.radius,
         volumetric=args.volumetric,
         interior_density=args.interior_density,
         **method,
@@ -293,13 +302,17 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         inputs = load_job_inputs(job, note=tell)
         return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings)
-    if args.volumetric and args.weights != DEFAULT_WEIGHTS:
+    if args.volumetric and args.weights not in (None, DEFAULT_WEIGHTS):
         from arapkit.methods.volumetric import DEFAULT_VOLUME_WEIGHTS
 
         note(f"--weights {args.weights} applies to surface ARAP; the volume's edges use "
              f"'{DEFAULT_VOLUME_WEIGHTS}' weights (see docs/volumetric.md)", args.quiet)
     prepared = prepare_job(job, note=tell)
     mesh, hs = prepared.mesh, prepared.handles
+    if args.output is not None:  # now that the input is read: a mesh's or a cloud's format
+        from arapkit.io.clouds import check_shape_output
+
+        check_shape_output(args.output, mesh)
     with Progress(disable=args.quiet) as progress:
         res = prepared.solve(callback=progress)
     if not res.converged:
@@ -394,7 +407,8 @@ def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
     from arapkit.workflows.jobs import describe_groups, describe_rings
 
     box = bounding_box(mesh.vertices)
-    print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices, box min "
+    kind = "mesh" if mesh.faces is not None else "point cloud"
+    print(f"{kind}: {args.mesh} ({mesh.n_vertices} vertices, box min "
           f"{_vec(box.min)} max {_vec(box.max)})")
     print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
     for line in describe_groups(mesh.vertices, hs):
@@ -422,7 +436,8 @@ def _print_summary(args, mesh, hs, res, wall: float) -> None:
         + ("" if mesh.welded_from is None else
            f" (welded from the input's {mesh.welded_from.source.n_vertices}; the output "
            "has the input's vertices)"),
-        f"faces: {mesh.n_faces}",
+        f"faces: {mesh.n_faces}" if mesh.faces is not None else
+        f"graph: {mesh.graph_description}, {len(mesh.edges)} edges (a point cloud)",
         f"handles: {len(hs.indices)} in {len(hs.groups)} group(s)",
         f"method: {args.energy}",
         f"iterations: {res.iterations}",

@@ -14,8 +14,10 @@ atomically, ``.gz`` compressed where asked:
 
 Normals turn with the deformation: a solve's :class:`~arapkit.Result` carries each point's
 fitted rotation ``R_k`` (the local step's), and the written normal is ``R_k n_k``. Given
-positions alone, the normals are written as they were, and the warnings say so. One warning
-line per kind of data the target format has no place for, as for meshes.
+positions alone, each point's rotation is fitted to its graph neighbourhood, rest to
+deformed (:func:`fit_point_rotations`: the local step with uniform weights), so a rigid
+motion turns the normals exactly. One warning line per kind of data the target format has
+no place for, as for meshes.
 
 Examples
 --------
@@ -23,10 +25,11 @@ Examples
 >>> from arapkit.mesh.cloud import PointCloud
 >>> d = pathlib.Path(tempfile.mkdtemp())
 >>> c = PointCloud(np.eye(3), normals=np.tile([0.0, 0, 1], (3, 1)))
->>> print(save_points(d / "c.xyzn", 2 * np.eye(3), like=c)[0])
-c.xyzn: normals were written as they were (pass the solve's Result to turn them)
->>> (d / "c.xyzn").read_text().splitlines()[0]
-'2 0 0 0 0 1'
+>>> save_points(d / "c.xyzn", c.points + [0, 0, 5], like=c)  # a translation: normals kept
+[]
+>>> from arapkit.io import load_points
+>>> (np.round(load_points(d / "c.xyzn").normals[0], 12) + 0.0).tolist()
+[0.0, 0.0, 1.0]
 """
 
 from __future__ import annotations
@@ -45,7 +48,8 @@ from ..mesh.attributes import MeshAttributes
 from .atomic import atomic_write
 from .ply import PLY_TYPES
 
-__all__ = ["CLOUD_WRITE_FORMATS", "cloud_format", "save_points", "turned_normals"]
+__all__ = ["CLOUD_WRITE_FORMATS", "cloud_format", "fit_point_rotations", "save_points",
+           "turned_normals"]
 
 #: output formats of a point cloud, by extension (``.gz`` may follow all but npy)
 CLOUD_WRITE_FORMATS = ("ply", "obj", "off", "xyz", "xyzn", "xyzrgb", "npy")
@@ -87,6 +91,40 @@ def turned_normals(normals: np.ndarray, rotations: np.ndarray | None) -> np.ndar
     if rotations is None:
         return N
     return np.einsum("nij,nj->ni", np.asarray(rotations, dtype=np.float64), N)
+
+
+def fit_point_rotations(rest: np.ndarray, edges: np.ndarray,
+                        deformed: np.ndarray) -> np.ndarray:
+    """Each point's rotation best fitting its graph edges, rest to deformed (n, 3, 3):
+    ``argmin_R sum_j |e'_ij - R e_ij|^2`` (Kabsch; the ARAP local step with uniform
+    weights). A point without edges keeps the identity.
+
+    Examples
+    --------
+    >>> from scipy.spatial.transform import Rotation
+    >>> P = np.random.default_rng(0).random((20, 3))
+    >>> E = np.array([[i, j] for i in range(20) for j in range(i + 1, 20)])
+    >>> R = Rotation.from_rotvec([0.1, 0.5, -0.2]).as_matrix()
+    >>> bool(np.allclose(fit_point_rotations(P, E, P @ R.T), R))
+    True
+    """
+    n = len(rest)
+    E = np.asarray(edges, dtype=np.int64)
+    d0 = rest[E[:, 0]] - rest[E[:, 1]]
+    d1 = deformed[E[:, 0]] - deformed[E[:, 1]]
+    outer = np.einsum("ei,ej->eij", d0, d1)
+    S = np.zeros((n, 3, 3))
+    np.add.at(S, E[:, 0], outer)
+    np.add.at(S, E[:, 1], outer)  # an edge is in both ends' neighbourhoods, same sign
+    U, _, Vt = np.linalg.svd(S)
+    R = np.einsum("nji,nkj->nik", Vt, U)  # V U^T
+    flip = np.linalg.det(R) < 0
+    if flip.any():  # a reflection: turn the last axis of V around
+        Vt[flip, 2] *= -1
+        R[flip] = np.einsum("nji,nkj->nik", Vt[flip], U[flip])
+    alone = np.abs(S).reshape(n, 9).max(axis=1) == 0
+    R[alone] = np.eye(3)
+    return R
 
 
 def _column(name: str, values, n: int) -> np.ndarray:
@@ -221,7 +259,8 @@ def save_points(path: str | os.PathLike, points, like=None, *, normals=None,
         ``.ply``, ``.obj``, ``.off``, ``.xyz``, ``.xyzn``, ``.xyzrgb`` (optionally ``.gz``)
         or ``.npy``.
     points : (n, 3) float, a PointCloud, or a solve's Result
-        The positions; a :class:`~arapkit.Result` also turns the normals by its rotations.
+        The positions; a :class:`~arapkit.Result` also turns the normals by its rotations
+        (positions alone: by rotations fitted to each point's neighbourhood).
     like : PointCloud, optional
         The cloud ``points`` belong to: its normals, colours and properties are written
         with them (``save_points(path, cloud)`` writes a cloud as it is).
@@ -249,16 +288,15 @@ def save_points(path: str | os.PathLike, points, like=None, *, normals=None,
         raise ValueError(f"{len(V)} points for a cloud of {like.n_vertices}")
     attrs = getattr(like, "attributes", None)
     props = dict(vertex_properties or {})
-    stale = None
     N = None
     if normals is not None:
         N = np.asarray(normals, dtype=np.float64).reshape(len(V), 3)
     elif like is not None and like.normals is not None:
-        turned = rotations is not None and np.shape(rotations) == (len(V), 3, 3)
-        N = turned_normals(like.normals, rotations if turned else None)
-        if not turned:
-            stale = ("normals were written as they were (pass the solve's Result to turn "
-                     "them)")
+        if rotations is None or np.shape(rotations) != (len(V), 3, 3):
+            # positions alone: each point's rotation fitted to its neighbourhood
+            rotations = fit_point_rotations(np.asarray(like.points, np.float64),
+                                            like.edges, V)
+        N = turned_normals(like.normals, rotations)
     if fmt == "npy":
         buf = io.BytesIO()
         np.save(buf, V, allow_pickle=False)
@@ -273,6 +311,4 @@ def save_points(path: str | os.PathLike, points, like=None, *, normals=None,
     if gz:
         data = gzip.compress(data, mtime=0)
     atomic_write(path, data)
-    written = N is not None and not any("normals were not written" in w for w in warn)
-    notes = [stale] if stale is not None and written else []
-    return [f"{Path(path).name}: {w}" for w in notes + warn]
+    return [f"{Path(path).name}: {w}" for w in warn]

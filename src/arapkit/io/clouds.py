@@ -33,11 +33,12 @@ from ..mesh.attributes import MeshAttributes
 from ..mesh.cloud import PointCloud
 from ..mesh.model import Mesh
 from .arrays import load_numpy
-from .formats import readable_formats
+from .cloud_writer import CLOUD_WRITE_FORMATS, cloud_format
+from .formats import MESH_FORMATS, mesh_format, readable_formats
 from .readers import PARTS_FORMATS, load_mesh, mesh_from_parts, read_file, read_parts
 
-__all__ = ["CLOUD_READ_FORMATS", "XYZ_FORMATS", "cloud_formats_text", "is_cloud_file",
-           "load_points", "load_shape", "normals_of", "shape_formats_text"]
+__all__ = ["CLOUD_READ_FORMATS", "XYZ_FORMATS", "check_shape_output", "cloud_formats_text",
+           "is_cloud_file", "load_points", "load_shape", "normals_of", "shape_formats_text"]
 
 #: the text formats of points, one row a point (Open3D's names): x y z [anything], with
 #: normals, with colours
@@ -259,3 +260,37 @@ def shape_formats_text() -> str:
     'meshes OFF, OBJ, PLY, STL; point clouds PLY, OBJ, OFF, XYZ, XYZN, XYZRGB, NPY'
     """
     return f"meshes {readable_formats()}; point clouds {cloud_formats_text()}"
+
+
+def check_shape_output(output: str | os.PathLike, shape) -> str:
+    """The output format for ``shape`` (a loaded Mesh or PointCloud, or the input's file
+    name before it is read), or a one-line error: a mesh is written as a mesh
+    (:data:`~arapkit.io.formats.MESH_FORMATS`), a point cloud as a cloud
+    (:data:`~arapkit.io.cloud_writer.CLOUD_WRITE_FORMATS`); a file name that could hold
+    either allows both until it is read.
+
+    Examples
+    --------
+    >>> check_shape_output("out.xyz", "scan.npy"), check_shape_output("out.ply", "x.off")
+    ('xyz', 'ply')
+    >>> check_shape_output("out.stl", "scan.xyz")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: out.stl: unsupported point cloud format '.stl' (use one of: ...)
+    """
+    if isinstance(shape, (str, os.PathLike)):
+        if is_cloud_file(shape):
+            return cloud_format(output)[0]
+        try:
+            return mesh_format(output)[0]
+        except InputError:
+            if _ext(os.fspath(output)) not in CLOUD_WRITE_FORMATS:
+                raise InputError(f"{output}: unsupported output format (a mesh: "
+                                 + ", ".join("." + f for f in MESH_FORMATS)
+                                 + "; a point cloud: "
+                                 + ", ".join("." + f for f in CLOUD_WRITE_FORMATS)
+                                 + ")") from None
+            return cloud_format(output)[0]
+    if getattr(shape, "faces", 0) is None:
+        return cloud_format(output)[0]
+    return mesh_format(output)[0]

@@ -122,22 +122,22 @@ def check_domain(shape, energy: str = "rring", *, volumetric: bool = False,
     >>> check_domain(PointCloud(np.eye(3), name="c.ply"), "sr-arap")
     Traceback (most recent call last):
     ...
-    arapkit.errors.InputError: c.ply: energy 'sr-arap' needs a triangle mesh and c.ply is ...
+    arapkit.errors.InputError: c.ply: energy='sr-arap' needs a triangle mesh and c.ply is ...
     """
     dom = domain_of(shape)
     if dom.has_faces:
         return
     name = shape.name
+    what = f" and {name} is a {dom.label}"
     if energy in method_names() and not method(energy).applies_to(False):
         fits = [m.name for m in methods("library") if m.applies_to(False)]
-        raise InputError(f"{name}: energy '{energy}' needs a triangle mesh and {name} is a "
-                         f"{dom.label} (methods for point clouds: {', '.join(fits)})")
+        raise InputError(Advice("{energy} needs a triangle mesh", energy=energy).after(
+            f"{name}: ").before(f"{what} (methods for point clouds: {', '.join(fits)})"))
     if volumetric:
-        raise InputError(f"{name}: volumetric=True fills a closed triangle surface; {name} "
-                         f"is a {dom.label}")
+        raise InputError(f"{name}: volumetric ARAP fills a closed triangle surface{what}")
     if isinstance(init, str) and init == "laplacian":
-        raise InputError(f"{name}: init='laplacian' (Laplacian editing) needs a triangle "
-                         f"mesh; {name} is a {dom.label}")
+        raise InputError(Advice("{init} (Laplacian editing) needs a triangle mesh",
+                                init="laplacian").after(f"{name}: ").before(what))
 
 
 def _refuse_acceleration(info: MethodInfo, remedy: str = "") -> None:

@@ -139,7 +139,8 @@ def _deform_command(job: dict, output: str) -> list[str]:
     cmd += ["--energy", job["energy"], "--tol", repr(job["tol"]),
             "--max-iter", str(job["max_iter"]), "--init", job["init"]]
     # the method's own options and welding, as given (deform fills in the same defaults)
-    for key, flag in (("sr_alpha", "--sr-alpha"), ("nodes", "--nodes"), ("weld", "--weld")):
+    for key, flag in (("sr_alpha", "--sr-alpha"), ("nodes", "--nodes"), ("weld", "--weld"),
+                      ("neighbours", "--neighbours"), ("radius", "--radius")):
         if job[key] is not None:
             cmd.append(f"{flag}={job[key]}")
     if job["accelerate"] is not None:  # None: the method's choice, as deform's default

@@ -23,6 +23,7 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from .. import validate
 from ..arap.domains import all_weight_kinds
 from ..errors import InputError
 from ..methods.deformer import INITS, check_method
@@ -41,7 +42,8 @@ __all__ = ["JOB_KEYS", "dry_run", "job_hash", "job_spec", "load_jobs", "normalis
 
 #: Keys a job object may have (``mesh``, ``handles`` and ``output`` are required).
 JOB_KEYS = ("mesh", "handles", "transform", "rings", "rings_file", "weights", "energy",
-            "sr_alpha", "nodes", "weld", "tol", "max_iter", "init", "accelerate", "output")
+            "sr_alpha", "nodes", "weld", "tol", "max_iter", "init", "accelerate", "output",
+            "neighbours", "radius")
 #: every optional key of :data:`JOB_KEYS` and its default
 _DEFAULTS = {k: JOB_DEFAULTS[k] for k in JOB_KEYS if k in JOB_DEFAULTS}
 
@@ -84,9 +86,24 @@ def _check_weld(value: Any, where: str) -> float | None:
     return float(value)
 
 
-def _check_output(out: Any, where: str) -> None:
-    """``output``: a mesh file name inside the output folder."""
-    from ..io import mesh_format
+def _check_graph(job: dict, where: str) -> None:
+    """``neighbours`` / ``radius``: a point cloud's graph (not both)."""
+    from ..mesh.neighbours import MAX_NEIGHBOURS
+
+    if job["neighbours"] is not None and job["radius"] is not None:
+        raise InputError(f"{where}: give 'neighbours' or 'radius', not both")
+    if job["neighbours"] is not None:
+        job["neighbours"] = validate.integer(job["neighbours"], f"{where}: 'neighbours'",
+                                             lo=1, hi=MAX_NEIGHBOURS)
+    if job["radius"] is not None:
+        job["radius"] = validate.number(job["radius"], f"{where}: 'radius'", lo=0.0,
+                                        lo_open=True)
+
+
+def _check_output(out: Any, where: str, job_mesh: str) -> None:
+    """``output``: a mesh (or, for a point cloud, a cloud) file name inside the output
+    folder."""
+    from ..io.clouds import check_shape_output
 
     if not isinstance(out, str) or not out:
         raise InputError(f"{where}: 'output' must be a file name inside the output folder")
@@ -95,7 +112,7 @@ def _check_output(out: Any, where: str) -> None:
         raise InputError(f"{where}: 'output' {out!r} must be a file name inside the output "
                          "folder (no absolute path, no '..')")
     try:
-        mesh_format(out)
+        check_shape_output(out, job_mesh)
     except InputError as e:
         raise InputError(f"{where}: {e}") from None
 
@@ -169,7 +186,8 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
                          f"got {json.dumps(job['init'])}")
     if job["accelerate"] is not None and not isinstance(job["accelerate"], bool):
         raise InputError(f"{where}: 'accelerate' must be true or false")
-    _check_output(job["output"], where)
+    _check_graph(job, where)
+    _check_output(job["output"], where, job["mesh"])
     return {k: job[k] for k in JOB_KEYS}
 
 

@@ -70,7 +70,7 @@ class DeformJob:
     Attributes
     ----------
     mesh : str
-        Input mesh file.
+        Input mesh file, or a point cloud file (:func:`arapkit.io.clouds.load_shape`).
     handles : str, list or dict
         Handle file (``.json`` groups or ``.sel``), or the handle groups themselves (the
         JSON schema of ``docs/handles.md``, already parsed).
@@ -94,6 +94,9 @@ class DeformJob:
     volumetric, interior_density
         Volumetric ARAP (:class:`arapkit.methods.volumetric.VolumetricDeformer`) and its interior
         density.
+    neighbours, radius : optional
+        A point cloud's graph (:class:`arapkit.PointCloud`): k nearest neighbours (default
+        10) or every pair closer than ``radius``; refused for a mesh file.
     """
 
     mesh: str
@@ -112,6 +115,8 @@ class DeformJob:
     weld: float | None = None
     volumetric: bool = False
     interior_density: float | None = None
+    neighbours: int | None = None
+    radius: float | None = None
 
     def input_files(self) -> list[str]:
         """The files this job reads."""
@@ -189,7 +194,7 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
     InputError
         Any bad input, with a one-line message naming the file.
     """
-    from ..io import load_mesh
+    from ..io import load_shape
 
     if job.energy not in ENERGIES:
         raise InputError(f"energy {job.energy} is not available in this build "
@@ -202,9 +207,12 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
             # Advice keeps its interface wording through the prefix
             note(msg.after(f"{job.mesh}: ") if isinstance(msg, Advice) else f"{job.mesh}: {msg}")
 
-    source = load_mesh(job.mesh)
+    source = load_shape(job.mesh, neighbours=job.neighbours, radius=job.radius)
     if job.weld is None:
         mesh = source
+    elif source.faces is None:
+        raise InputError(f"{job.mesh}: weld merges a mesh's split vertices; a point cloud has "
+                         "none (coincident points stay two points of the graph)")
     else:
         from ..mesh.welding import weld
 
@@ -262,17 +270,20 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
 
 
 def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[str]:
-    """Write the deformed mesh (atomically), with per-vertex energy and rings for PLY.
+    """Write the deformed mesh or point cloud (atomically), with per-vertex energy and
+    rings for PLY.
 
     Everything the input file carried (polygons, UVs, normals, materials, colours, PLY
-    properties) comes out again, and a welded solve is written to the input's own
-    vertices. Returns warning lines for what the output format cannot carry.
+    properties; a cloud's normals turned by the solve's rotations) comes out again, and a
+    welded solve is written to the input's own vertices. Returns warning lines for what
+    the output format cannot carry.
     """
     from ..io import save_mesh
 
+    # the result itself: a point cloud's normals turn by its rotations
     return save_mesh(
         output,
-        res.vertices,
+        res,
         vertex_properties={"energy": res.vertex_energy,
                            "rings": prepared.rings.astype(np.int32)},
         like=prepared.mesh,
@@ -334,6 +345,8 @@ def job_report(
             "mesh": job.mesh,
             "n_vertices": mesh.n_vertices,
             "n_faces": mesh.n_faces,
+            **({} if mesh.faces is not None else {"graph": mesh.graph_description,
+                                                  "n_edges": len(mesh.edges)}),
             "n_components": mesh.n_components,
             "n_boundary_loops": len(mesh.boundary_loops),
             "notes": list(mesh.notes),
