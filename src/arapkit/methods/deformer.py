@@ -129,7 +129,7 @@ def check_domain(shape, energy: str = "rring", *, volumetric: bool = False,
         return
     name = shape.name
     what = f" and {name} is a {dom.label}"
-    if energy in method_names() and not method(energy).applies_to(False):
+    if energy in method_names("library") and not method(energy).applies_to(False):
         fits = [m.name for m in methods("library") if m.applies_to(False)]
         raise InputError(Advice("{energy} needs a triangle mesh", energy=energy).after(
             f"{name}: ").before(f"{what} (methods for point clouds: {', '.join(fits)})"))
