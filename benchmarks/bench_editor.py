@@ -148,7 +148,9 @@ while not stop.is_set():
     size = int.from_bytes(frame[:8], "little")
     packed = int.from_bytes(frame[8:16], "little")
     head = dec.decompress(frame[16:16 + packed], max_output_size=size)
-    shape = b"vertices" in head and (b"/mesh/shaded" in head or b"/mesh/preview" in head)
+    # a mesh node's vertices, or (a point cloud) its splats' points
+    shape = ((b"vertices" in head and (b"/mesh/shaded" in head or b"/mesh/preview" in head))
+             or (b"points" in head and (b"/mesh/points" in head or b"/mesh/preview" in head)))
     print(f"{t!r} {len(frame)} {int(shape)}", flush=True)
 ws.close()
 """
@@ -158,9 +160,9 @@ class FrameCounter:
     """A websocket client of the editor that timestamps every frame it receives.
 
     A frame counts as a shape when it carries a mesh node's new vertices (the shaded mesh
-    or the preview proxy): what a browser would draw. The client runs in its own process,
-    as a browser does: in the editor's process its decoding took the editor's GIL (the
-    release at 437K took about 0.25 s longer with it,
+    or the preview proxy; a point cloud's splat node's points): what a browser would draw.
+    The client runs in its own process, as a browser does: in the editor's process its
+    decoding took the editor's GIL (the release at 437K took about 0.25 s longer with it,
     ``docs/studies/interactive-at-scale.md``, item 19).
     ``frames`` holds ``(perf_counter time, bytes, shape)`` as they arrive. The client's
     process id goes into ``ignore`` (a :class:`Watch`'s) as soon as it starts, so that the

@@ -159,3 +159,12 @@ def test_batch_jobs_deform_clouds_as_deform_does(tmp_path, capsys):
                        "neighbours": 8, "radius": 0.5}, tmp_path)
     with pytest.raises(InputError, match="job: o.stl: unsupported point cloud format '.stl'"):
         normalise_job({"mesh": "c.xyz", "handles": "h.json", "output": "o.stl"}, tmp_path)
+
+
+def test_info_describes_a_cloud(capsys):
+    capsys.readouterr()
+    assert main(["info", str(CLOUD), "--json"]) == 0
+    facts = json.loads(capsys.readouterr().out)
+    assert facts["points"] == 2000 and facts["graph"] == "kNN, k = 10"
+    assert facts["normals"] and facts["colours"] and "part" in facts["properties"]
+    assert facts["edges"] == len(load_points(CLOUD).edges)
