@@ -22,7 +22,6 @@ import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
-from ...arap.energies.rring import ring_blend
 from ...mesh.model import Mesh
 
 __all__ = ["SKIN_NEIGHBOURS", "Binding", "full_tree_of", "proxy_rings"]
@@ -222,23 +221,17 @@ class Binding:
         return out
 
 
-def proxy_rings(rings: np.ndarray, near_full: np.ndarray,
-                counted_at: float | None = None) -> np.ndarray:
+def proxy_rings(rings: np.ndarray, near_full: np.ndarray) -> np.ndarray:
     """The proxy's rigidity map: the full r where each proxy vertex is bound.
 
     The proxy counts these r in the full mesh's rings (its solver's ``ring_scale`` is
     ``h_full / h_proxy``), so that it is as stiff as the full mesh
-    (:mod:`arapkit.arap.energies.rring`). A proxy without triangles (a point cloud's)
-    takes ``counted_at = h_full / h_proxy`` instead: r counted at its own scale,
-    ``max(1, rint(r s))`` (:func:`~arapkit.arap.energies.rring.ring_blend`).
+    (:mod:`arapkit.arap.energies.rring`).
 
     Examples
     --------
     >>> import numpy as np
     >>> proxy_rings(np.array([1, 5, 9]), np.array([2, 0])).tolist()
     [9, 1]
-    >>> proxy_rings(np.array([1, 5, 9]), np.array([2, 0]), 0.25).tolist()
-    [2, 1]
     """
-    r = np.asarray(rings, dtype=np.int32)[near_full]
-    return r if counted_at is None else ring_blend(r, counted_at)[0]
+    return np.asarray(rings, dtype=np.int32)[near_full]

@@ -157,10 +157,6 @@ class MultiresDeformer:
         mesh = as_shape(mesh)
         check_domain(mesh, energy, init=options.get("init", "identity"))
         self._coarsening = coarsening_of(mesh)
-        # a coarse copy without triangles cannot blend in a membrane where its own rings
-        # are stiffer than the full shape's r (arapkit.arap.energies.rring): it searches
-        # the full shape's r counted at its own scale instead, max(1, rint(r s))
-        self._rings_counted_here = not domain_of(mesh).has_faces
         self.mesh = mesh
         self.energy = energy
         self.handles = check_handles(mesh, handles)
@@ -195,7 +191,7 @@ class MultiresDeformer:
         self._checked: np.ndarray | None = None
         self._fine = FineStages(mesh, self.proxy_mesh, self._home, level_sizes, weights,
                                 options, self._coarse_solver, self.handles, self._rings,
-                                self._region, rings_counted_here=self._rings_counted_here)
+                                self._region)
         if background:
             self.prepare(background=True)
 
@@ -222,8 +218,7 @@ class MultiresDeformer:
         the method has a rigidity map, so that the coarse mesh is as stiff as the full one;
         its parts without a handle follow, whatever the full mesh does with its own."""
         scale = {}
-        if (edge_ratio is not None and method(self.energy).rigidity_map
-                and not self._rings_counted_here):
+        if edge_ratio is not None and method(self.energy).rigidity_map:
             scale["ring_scale"] = self._options.get("ring_scale", 1.0) * edge_ratio
         return Deformer(mesh, handles, rings, self._weights, energy=self.energy,
                         accelerate=True, free_components="follow", multires=False, **scale,
@@ -272,8 +267,7 @@ class MultiresDeformer:
             self.binding, self.handles, self._region, self.mesh.n_vertices)
 
     def _proxy_rings(self) -> np.ndarray:
-        return proxy_rings(self._rings, self.binding.near_full,
-                           self.edge_ratio if self._rings_counted_here else None)
+        return proxy_rings(self._rings, self.binding.near_full)
 
     def proxy_targets(self, targets: np.ndarray) -> np.ndarray:
         """Targets of the proxy's handles: each handle region's fitted rigid motion.

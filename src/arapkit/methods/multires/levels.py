@@ -177,10 +177,9 @@ class FineStages:
     def __init__(self, mesh: Mesh, proxy_mesh: Mesh, home: np.ndarray,
                  level_sizes: list[int], weights, options: dict,
                  coarse_solver: CoarseSolver, handles: np.ndarray, rings: np.ndarray,
-                 region: np.ndarray, rings_counted_here: bool = False) -> None:
+                 region: np.ndarray) -> None:
         self.mesh = mesh
         self._coarsening = coarsening_of(mesh)
-        self._rings_counted_here = rings_counted_here
         self._proxy_mesh, self._home = proxy_mesh, home
         self._level_sizes = level_sizes
         self._weights, self._options = weights, options
@@ -225,8 +224,7 @@ class FineStages:
                     rings: np.ndarray) -> None:
         """Give ``level`` the full mesh's handles and r, and factorise its solver."""
         lh, lr = coarse_handles(level.full, handles, region, self.mesh.n_vertices)
-        lrings = proxy_rings(rings, level.full.near_full,
-                             level.edge_ratio if self._rings_counted_here else None)
+        lrings = proxy_rings(rings, level.full.near_full)
         if level.solver is None:
             level.solver = self._coarse_solver(level.mesh, lh, lrings, level.edge_ratio)
         repose(level.solver, lh, lrings)
