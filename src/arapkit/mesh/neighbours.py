@@ -12,9 +12,9 @@ for a graph given by the caller.
 Why ``k = 10`` (:data:`DEFAULT_NEIGHBOURS`): on clouds sampled from four meshes (the
 cactus, CGAL's cow, elephant and homer, twice as many points as vertices), the RMS
 distance of the cloud's deformation from the mesh's own ARAP result for the same handles
-fell from k = 6 to k = 10 (0.41 -> 0.23 % of the diagonal on the cactus, 0.91 -> 0.54 %
-on the cow) and levelled off beyond 12, while an iteration costs in proportion to the
-edges (``docs/clouds.md`` has the table and the command).
+fell from k = 6 to k = 10 (0.42 -> 0.23 % of the diagonal on the cactus, 0.82 -> 0.42 %
+on the cow) and little beyond, while an iteration costs in proportion to the edges
+(``docs/clouds.md`` has the table and the command).
 
 Examples
 --------
