@@ -15,6 +15,9 @@ licence (MIT, see ``pyproject.toml``); no third-party data is involved.
 * ``cactus-points.ply``: 2,000 points sampled on the cactus's surface (uniformly by area,
   seed 46), a point cloud with normals, colours and a custom property ``part`` (0 pot,
   1 plant), float32 like a scanner's; ``cactus.json`` moves it as it moves the mesh.
+* ``finger-scan.xyz`` / ``finger-landmarks.json``: a scan of the finger bent 60 degrees (1,200
+  points with normals, 0.2 % noise, the 30 % facing away from the scanner missing) and
+  three of the finger's vertices with their positions in it, for ``arapkit fit``.
 
 Handle files (``*.json``, ``handles/``) are written by hand, not by this script.
 
@@ -34,6 +37,7 @@ import numpy as np
 import trimesh
 
 from arapkit.io import save_def, save_mesh, save_rings, save_sel
+from arapkit.io.landmarks import save_landmarks
 from arapkit.mesh.attributes import MeshAttributes
 from arapkit.mesh.cloud import PointCloud
 from arapkit.mesh.shapes import bar, bar_two_materials
@@ -169,6 +173,26 @@ def _float32_ply(path: Path, cloud: PointCloud) -> None:
     path.write_bytes(("\n".join(head) + "\n").encode() + rec.tobytes())
 
 
+def finger_scan(V: np.ndarray, F: np.ndarray, n: int = 1200, seed: int = 0):
+    """A one-sided scan of the surface (V, F): ``n`` points drawn by area with their
+    triangles' normals and 0.2 % noise, less the 30 % whose normals face most away from a
+    scanner on +y (rounded to 4 decimals, as a text scan would be)."""
+    rng = np.random.default_rng(seed)
+    a, b, c = V[F[:, 0]], V[F[:, 1]], V[F[:, 2]]
+    cross = np.cross(b - a, c - a)
+    area = np.linalg.norm(cross, axis=1)
+    f = rng.choice(len(F), size=n, p=area / area.sum())
+    u, v = rng.random(n), rng.random(n)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    P = a[f] + u[:, None] * (b[f] - a[f]) + v[:, None] * (c[f] - a[f])
+    N = cross[f] / area[f, None]
+    diag = float(np.linalg.norm(V.max(axis=0) - V.min(axis=0)))
+    P += rng.normal(0.0, 0.002 * diag, P.shape)
+    keep = np.sort(np.argsort(N[:, 1])[int(0.3 * n):])  # the scanner looks from +y
+    return np.round(np.hstack([P[keep], N[keep]]), 4)
+
+
 def main(out: Path = HERE) -> None:
     """Write every generated example file into ``out``."""
     out = Path(out)
@@ -187,6 +211,12 @@ def main(out: Path = HERE) -> None:
     save_mesh(out / "finger.off", Vf, Ff)
     frames = np.stack([finger_bend(Vf, d) for d in (0, 15, 30, 45, 60, 75)])
     np.savez_compressed(out / "finger-bend.npz", V=frames.astype(np.float32), F=Ff)
+    bent = finger_bend(Vf, 60)
+    np.savetxt(out / "finger-scan.xyz", finger_scan(bent, Ff), fmt="%.4f",
+               header="x y z nx ny nz: the finger of finger.off bent 60 degrees, scanned from +y")
+    tip, middle, base = len(Vf) - 1, int(np.argmin(np.abs(Vf[:, 2] - 3.2) + Vf[:, 1])), 5
+    save_landmarks(out / "finger-landmarks.json", [tip, middle, base],
+                   np.round(bent[[tip, middle, base]], 6) + 0.0)
 
     Vc, Fc = cactus()
     save_mesh(out / "cactus.off", Vc, Fc)

@@ -216,7 +216,8 @@ def test_shipped_examples_are_what_the_script_makes(tmp_path):
     mod.main(tmp_path)
     made = sorted(p.name for p in tmp_path.iterdir())
     assert made == ["bar-rings.txt", "bar.def", "bar.off", "bar.sel", "cactus-points.ply",
-                    "cactus.off", "finger-bend.npz", "finger.off"]
+                    "cactus.off", "finger-bend.npz", "finger-landmarks.json", "finger-scan.xyz",
+                    "finger.off"]
     for name in made:
         if name.endswith(".npz"):
             a, b = np.load(tmp_path / name), np.load(EX / name)

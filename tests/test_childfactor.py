@@ -138,3 +138,39 @@ def test_a_background_build_puts_the_full_factor_in_a_child(monkeypatch):
     a, b = beside.solve(t), here.solve(t)
     assert a.iterations == b.iterations
     assert np.abs(a.vertices - b.vertices).max() < 1e-12 * mesh.bounding_box_diagonal
+
+
+def test_children_import_what_is_on_this_process_path_only(tmp_path, monkeypatch):
+    """An embedded interpreter (Blender) puts an extension's wheels on sys.path at run time:
+    both kinds of child (a factor, a decimation) must import from there too: a package in a
+    folder on this process's sys.path alone must be found by each child."""
+    import subprocess
+    import sys
+
+    import arapkit.methods.multires.decimator as decimator
+    from arapkit.arap.childfactor import child_env
+
+    marker = tmp_path / "sitepkg"
+    (marker / "arapkit_probe_pkg").mkdir(parents=True)
+    (marker / "arapkit_probe_pkg" / "__init__.py").write_text("WHERE = 'extension'\n")
+    monkeypatch.syspath_prepend(str(marker))
+    probe = [sys.executable, "-c", "import arapkit_probe_pkg; print(arapkit_probe_pkg.WHERE)"]
+    plain = subprocess.run(probe, capture_output=True, text=True,
+                           env={k: v for k, v in child_env().items() if k != "PYTHONPATH"})
+    assert plain.returncode != 0  # without the path the probe is not found: the test bites
+    got = subprocess.run(probe, capture_output=True, text=True, env=child_env())
+    assert got.stdout.strip() == "extension"
+    # both launchers pass that environment
+    seen = []
+    real_run, real_popen = subprocess.run, subprocess.Popen
+    monkeypatch.setattr(decimator.subprocess, "run",
+                        lambda *a, **k: seen.append(k.get("env")) or real_run(*a, **k))
+    mesh = bar(segments=(20, 4, 4))
+    V, F = decimator._decimator_input(mesh, decimator._frame(mesh), 100)
+    decimator._run_child(V, F, 100)
+    monkeypatch.setattr(childfactor.subprocess, "Popen",
+                        lambda *a, **k: seen.append(k.get("env")) or real_popen(*a, **k))
+    A = sp.coo_matrix(np.array([[4.0, 1.0], [1.0, 3.0]]))
+    ChildCholesky(2, A.row.astype(np.int32), A.col.astype(np.int32), A.data).close()
+    assert len(seen) == 2
+    assert all(str(marker) in env["PYTHONPATH"].split(os.pathsep) for env in seen)

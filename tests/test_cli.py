@@ -740,3 +740,17 @@ def test_accelerate_flag_reaches_the_solver(tmp_path, bar_file):
     assert np.all(np.diff(H) <= 1e-10 * H[0])
     plain = reports[False]["result"]["energy"]
     assert acc["result"]["energy"] == pytest.approx(plain, rel=1e-3)
+
+
+def test_edit_takes_deform_short_options():
+    """A line written for ``deform`` (-H, -r, -G) opens the same files in ``edit``."""
+    from arapkit.cli import build_parser
+
+    parser = build_parser()
+    short = parser.parse_args(["edit", "m.off", "-H", "h.json", "-r", "3", "-G", "g.json"])
+    long = parser.parse_args(["edit", "m.off", "--handles", "h.json", "--rings", "3",
+                              "--groups", "g.json"])
+    assert (short.handles, short.rings, short.groups) == ("h.json", 3, "g.json")
+    assert (long.handles, long.rings, long.groups) == ("h.json", 3, "g.json")
+    deform = parser.parse_args(["deform", "m.off", "-H", "h.json", "-r", "3", "-G", "g.json"])
+    assert (deform.handles, deform.rings, deform.groups) == ("h.json", 3, "g.json")

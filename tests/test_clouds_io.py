@@ -200,11 +200,11 @@ def test_a_cloud_from_an_array_saves_as_plain_points(tmp_path):
 
 
 @pytest.mark.parametrize("name, content, message", [
-    ("e.xyz", "", "no points"),
+    ("e.xyz", "", "the point cloud is empty"),
     ("b.xyz", "0 0 0\n1 x 0\n", "line 2: malformed number"),
-    ("s.xyzn", "0 0 0 0 0 1\n1 0 0 0\n", r"line 2: a row of .xyzn needs 6 numbers"),
+    ("s.xyzn", "0 0 0 0 0 1\n1 0 0 0\n", r"line 2 has 4 numbers: a row of .xyzn needs 6"),
     ("n.xyz", "0 0 0\nnan 0 0\n", "point 1 has a non-finite coordinate"),
-    ("short.xyz", "0 0\n", "a row of .xyz needs 3 numbers"),
+    ("short.xyz", "0 0\n", "a row of .xyz needs 3"),
     ("o.off", "OFF\n3 0 0\n0 0 0\n1 0 0\n", "truncated"),
     ("z.off", "OFF\n0 0 0\n", "the point cloud is empty"),
     ("v.obj", "o nothing\n", "no vertices"),
@@ -212,7 +212,7 @@ def test_a_cloud_from_an_array_saves_as_plain_points(tmp_path):
      "PLY vertices have no x, y, z properties"),
     ("t.ply", "ply\nformat ascii 1.0\nelement vertex 2\nproperty float x\nproperty float y\n"
               "property float z\nend_header\n0 0 0\n", "ply"),
-    ("u.txt", "0 0 0\n", "unsupported point cloud format '.txt'"),
+    ("u.csv", "0 0 0\n", "unsupported point cloud format '.csv'"),
 ])
 def test_bad_files_are_refused_in_one_line(tmp_path, name, content, message):
     p = tmp_path / name
@@ -224,7 +224,7 @@ def test_bad_files_are_refused_in_one_line(tmp_path, name, content, message):
 
 
 @pytest.mark.parametrize("array, message", [
-    (np.zeros((4, 2)), r"must have shape \(n, 3\), got \(4, 2\)"),
+    (np.zeros((4, 2)), r"must have shape \(n, 3\), or \(n, 6\) with normals, got \(4, 2\)"),
     (np.array(["a", "b", "c"] * 2).reshape(2, 3), "must hold numbers"),
     (np.zeros((0, 3)), "the point cloud is empty"),
 ])
@@ -248,3 +248,39 @@ def test_the_graph_options_reach_the_cloud(files):
     c = load_points(files["xyz"], radius=0.5)
     assert c.radius == 0.5 and c.neighbours is None
     assert arapkit.load_points is load_points
+
+
+def test_the_fits_formats_load_through_the_one_loader(tmp_path):
+    """What the template fit's first reader took (``.npy`` (n, 6), ``.xyz`` / ``.txt`` /
+    ``.pts`` rows ``x y z nx ny nz``) loads here, normals included; a ``.xyz`` whose last
+    three columns are not unit vectors (colours) keeps them verbatim instead; and
+    ``arapkit.io.points`` (kept for one release) and the fit's target read the same."""
+    from arapkit.io.points import load_points as legacy_points
+    from arapkit.workflows.fitting import load_target
+
+    rng = np.random.default_rng(46)
+    P = rng.random((30, 3))
+    N = rng.normal(size=(30, 3))
+    N /= np.linalg.norm(N, axis=1)[:, None]
+    np.save(tmp_path / "a.npy", np.hstack([P, N]))
+    for ext in ("xyz", "txt", "pts"):
+        np.savetxt(tmp_path / f"b.{ext}", np.round(np.hstack([P, N]), 4), fmt="%.4f")
+    for name in ("a.npy", "b.xyz", "b.txt", "b.pts"):
+        c = load_points(tmp_path / name)
+        tol = 0 if name.endswith("npy") else 1e-4
+        assert np.abs(c.points - P).max() <= tol and c.normals is not None, name
+        assert np.abs(c.normals - N).max() <= 2 * tol + 1e-12, name
+        Q, M = legacy_points(tmp_path / name)
+        assert np.array_equal(Q, c.points) and np.array_equal(M, c.normals)
+        t = load_target(tmp_path / name)
+        assert t.kind == "points" and np.array_equal(t.points, c.points) and t.oriented
+    rgb = np.hstack([P, rng.integers(0, 256, (30, 3))])
+    np.savetxt(tmp_path / "c.xyz", rgb, fmt="%.6g")
+    c = load_points(tmp_path / "c.xyz")
+    assert c.normals is None and np.array_equal(c.attributes.vertex_extra, rgb[:, 3:])
+    # x y z nx ny nz rows are written back so, the normals turned with the shape
+    c = load_points(tmp_path / "b.xyz")
+    Rz = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
+    assert save_points(tmp_path / "out.xyz", c.points @ Rz.T, like=c) == []
+    back = np.loadtxt(tmp_path / "out.xyz")
+    assert back.shape == (30, 6) and np.allclose(back[:, 3:], c.normals @ Rz.T, atol=1e-9)

@@ -30,6 +30,7 @@ from arapkit.methods.registry import (
     VOLUMETRIC_INTERFACES,
     method,
     method_names,
+    methods,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -39,6 +40,10 @@ HANDLES = ROOT / "examples" / "cactus.json"
 CLOUD = ROOT / "examples" / "cactus-points.ply"
 #: the shape file of each domain
 SHAPES = {"mesh": MESH, "cloud": CLOUD}
+#: a rigid left arm (held by its hand's handles) and a right arm with one shared rotation
+GROUPS = ROOT / "examples" / "cactus-groups.json"
+#: a rigid part keeps its edge lengths to this, relative to each edge
+RIGID_TOL = 1e-9
 #: hard constraints: met to round-off of the bounding-box diagonal
 HARD_TOL = 1e-9
 #: free vertices must move at least this much (relative to the diagonal): the arms swing
@@ -57,12 +62,14 @@ class Variant:
     volumetric: bool = False
     init: str = "identity"
     domain: str = "mesh"
+    groups: bool = False
 
     @property
     def id(self) -> str:
         extra = [f"r{self.rings}"] if self.rings != "1" else []
         extra += ["volumetric"] * self.volumetric + (["laplacian-init"] if self.init !=
                                                       "identity" else [])
+        extra += ["groups"] * self.groups
         return "-".join([*(["cloud"] if self.domain == "cloud" else []), self.energy, *extra])
 
     def refusal(self, interface: str) -> str | None:
@@ -73,8 +80,6 @@ class Variant:
         if interface not in can.interfaces:
             return NOT_OFFERED[interface]
         if self.domain == "cloud":
-            if interface == "torch":  # ARAPLayer's default weights are a mesh's
-                return "need triangles"
             if not can.applies_to(False):
                 return "needs a triangle mesh"
             if self.volumetric:
@@ -85,6 +90,8 @@ class Variant:
             return "volumetric=True runs r-ring ARAP"
         if self.rings != "1" and not can.rigidity_map:
             return "has no rigidity map"
+        if self.groups and not can.groups:
+            return "takes no vertex groups"
         return None
 
 
@@ -98,7 +105,9 @@ def _variants() -> list[Variant]:
     for e in method_names():
         vol_r = "mixed" if method(e).rigidity_map else "1"
         out += [Variant(e), Variant(e, "3"), Variant(e, "mixed"),
-                Variant(e, vol_r, volumetric=True), Variant(e, init="laplacian")]
+                Variant(e, vol_r, volumetric=True), Variant(e, init="laplacian"),
+                # rigid parts and shared rotations, with the mixed map where there is one
+                Variant(e, vol_r, groups=True)]
     # on the point cloud: each cell with one reason to refuse (a method on triangles is
     # asked for plainly; the others as on the mesh)
     for e in method_names():
@@ -123,16 +132,20 @@ def _expressible(v: Variant, interface: str) -> bool:
                     and not v.volumetric and v.init == "identity"
                     and (v.rings == "1" or can.rigidity_map))
     if interface == "compare":  # runs its fixed set: nothing to ask, nothing to refuse
+        from arapkit.workflows.compare import RINGS_METHOD
+
         return interface in can.interfaces and v.refusal(interface) is None \
-            and v.init == "identity"
-    if interface == "editor":  # the painted map is ignored by methods without one
+            and v.init == "identity" and (v.rings == "1" or v.energy == RINGS_METHOD) \
+            and not v.groups
+    if interface == "editor":  # painted r and groups are ignored by methods without them
         return interface in can.interfaces and v.init == "identity" and (
-            v.rings == "1" or can.rigidity_map) and (not v.volumetric or can.volumetric)
+            v.rings == "1" or can.rigidity_map) and (not v.volumetric or can.volumetric) \
+            and (not v.groups or can.groups)
     if interface == "torch":
         return not v.volumetric and v.init == "identity"
     if interface == "blender":  # its Method menu lists only what it offers; no volume, no init
         return interface in can.interfaces and v.init == "identity" and not v.volumetric and (
-            v.rings == "1" or can.rigidity_map)
+            v.rings == "1" or can.rigidity_map) and not v.groups
     return True
 
 
@@ -175,7 +188,7 @@ def folder(tmp_path_factory) -> Path:
 
 
 def _check_deformed(v: Variant, V: np.ndarray) -> None:
-    """Finite, deformed beyond the handles, handles at their targets."""
+    """Finite, deformed beyond the handles, handles at their targets, rigid parts rigid."""
     mesh, hs, _ = _case(v.domain)
     diag = mesh.bounding_box_diagonal
     assert V.shape == mesh.vertices.shape and np.isfinite(V).all()
@@ -183,6 +196,19 @@ def _check_deformed(v: Variant, V: np.ndarray) -> None:
     assert np.linalg.norm(V[free] - mesh.vertices[free], axis=1).max() > MIN_MOTION * diag
     err = np.linalg.norm(V[hs.indices] - hs.targets, axis=1).max()
     assert err <= max(method(v.energy).handle_tol, HARD_TOL) * diag
+    if v.groups:
+        g = _groups()
+        E = mesh.edges[np.isin(mesh.edges, g.members(int(np.argmax(g.rigid)))).all(axis=1)]
+        rest = np.linalg.norm(mesh.vertices[E[:, 0]] - mesh.vertices[E[:, 1]], axis=1)
+        now = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+        assert np.abs(now / rest - 1).max() < RIGID_TOL
+
+
+@cache
+def _groups():
+    from arapkit.io import load_groups
+
+    return load_groups(GROUPS, _case()[0])
 
 
 # ---------------------------------------------------------------------------- interfaces
@@ -191,6 +217,8 @@ def _check_deformed(v: Variant, V: np.ndarray) -> None:
 def _library(v: Variant, folder: Path) -> np.ndarray:
     mesh, hs, _ = _case(v.domain)
     kw = {"volumetric": True} if v.volumetric else {}
+    if v.groups:
+        kw["groups"] = _groups()
     d = Deformer(mesh, hs.indices, rings=_rings(v), energy=v.energy, init=v.init, **kw)
     return d.solve(hs.targets).vertices
 
@@ -213,7 +241,7 @@ def _deform(v: Variant, folder: Path, capsys) -> np.ndarray:
     out = folder / f"{v.id}.ply"
     argv = ["deform", str(SHAPES[v.domain]), "--handles", str(HANDLES), "--energy", v.energy,
             *_cli_rings(v, folder), "--init", v.init, *(["--volumetric"] * v.volumetric),
-            "-o", str(out), "-q", "--force"]
+            *(["--groups", str(GROUPS)] * v.groups), "-o", str(out), "-q", "--force"]
     capsys.readouterr()
     code = main(argv)
     err = capsys.readouterr().err.strip()
@@ -269,6 +297,8 @@ def _batch(v: Variant, folder: Path, capsys) -> np.ndarray:
         job["rings"] = int(v.rings)
     if v.volumetric:
         job["volumetric"] = True
+    if v.groups:
+        job["groups"] = str(GROUPS)
     row = run_job(normalise_job(job, folder), folder / "batch", resume=False)
     if row["status"] != "ok":
         assert row["status"] == "failed" and "\n" not in row["error"]
@@ -290,7 +320,8 @@ def _editor(v: Variant, folder: Path, capsys) -> np.ndarray:
         painted = np.broadcast_to(_rings(v), (mesh.n_vertices,)).astype(np.int32)
         w.submit(SolveRequest(mesh, hs.indices, hs.targets, painted,
                               SolverSettings(method=v.energy, volumetric=v.volumetric,
-                                             max_iter=1000)))
+                                             max_iter=1000),
+                              groups=_groups() if v.groups else None))
         assert w.wait_idle(300)
     finally:
         w.stop()
@@ -307,7 +338,7 @@ def _torch(v: Variant, folder: Path, capsys) -> np.ndarray:
 
     mesh, hs, _ = _case(v.domain)
     layer = ARAPLayer(mesh, hs.indices, rings=_rings(v), energy=v.energy,
-                      dtype=torch.float64)
+                      dtype=torch.float64, **({"groups": _groups()} if v.groups else {}))
     return layer(torch.tensor(hs.targets)).detach().numpy()
 
 
@@ -447,3 +478,120 @@ def test_batch_report_command_reproduces_the_job(folder, capsys):
     argv = command[1:command.index("-o")] + ["-o", str(again), "-q", "--force"]
     assert main(argv) == 0, capsys.readouterr().err
     assert np.array_equal(_ply(again), _ply(folder / "batch" / "cmd.ply"))
+
+
+# ------------------------------------------------------------------------ the 2D rows
+# (issue 48) every method the registry marks ``planar`` through each door that offers it, on
+# a planar mesh: solved in its plane, handles met, no triangle turned over; and the doors
+# that are 2D only: warp (library and command line) and the 2D editor.
+
+PLANAR = [m.name for m in methods() if m.planar]
+PLANAR_DOORS = ("library", "cli", "batch", "editor", "torch")
+
+
+@cache
+def _planar_case(folder: Path):
+    from arapkit.io import save_mesh
+    from arapkit.mesh.shapes2d import strip, strip_ends
+
+    m = strip(segments=(24, 6))
+    left, right = strip_ends(m)
+    V = m.vertices
+    path = folder / "strip.obj"
+    save_mesh(path, V, m.faces)
+    hpath = folder / "strip-handles.json"
+    hpath.write_text(json.dumps([
+        {"name": "held", "indices": left.tolist()},
+        {"name": "bent", "indices": right.tolist(), "translate": [-1.0, 1.5, 0.0]}]))
+    return m, path, hpath, load_handles(hpath, V)
+
+
+def _check_planar(m, hs, V: np.ndarray, folds: int = 0) -> None:
+    from arapkit.mesh.planar import signed_areas
+
+    V = np.asarray(V, dtype=np.float64)
+    assert np.isfinite(V).all() and V.shape[0] == m.n_vertices
+    if V.shape[1] == 3:
+        assert np.abs(V[:, 2]).max() == 0.0  # stayed in its plane
+    P = V[:, :2]
+    assert np.abs(P[hs.indices] - hs.targets[:, :2]).max() <= HARD_TOL * 5.0
+    assert np.abs(P - m.vertices[:, :2]).max() > 0.5
+    # nothing turned over (the torch layer, plain ARAP without the guard: as many as the
+    # library's flips="allow")
+    assert int((signed_areas(P, m.faces) <= 0).sum()) == folds
+
+
+@pytest.mark.parametrize("energy, door", [(e, d) for e in PLANAR for d in PLANAR_DOORS
+                                          if d in method(e).interfaces],
+                         ids=lambda x: x)
+def test_door_2d(energy: str, door: str, folder: Path, capsys):
+    m, path, hpath, hs = _planar_case(folder)
+    if door == "library":
+        d = Deformer(m, hs.indices, energy=energy)
+        assert d.dim == 2
+        V = d.solve(hs.targets).vertices
+    elif door == "cli":
+        from arapkit.cli import main
+
+        out = folder / f"strip-{energy}.ply"
+        assert main(["deform", str(path), "--handles", str(hpath), "--energy", energy,
+                     "-o", str(out), "-q", "--force"]) == 0
+        V = _ply(out)
+    elif door == "batch":
+        pytest.importorskip("distributed", reason="batch jobs need arapkit[batch]")
+        from arapkit.workflows.batch import normalise_job, run_job
+
+        job = {"mesh": str(path), "handles": str(hpath), "energy": energy,
+               "output": f"strip-{energy}-batch.ply"}
+        row = run_job(normalise_job(job, folder), folder / "batch2d", resume=False)
+        assert row["status"] == "ok", row
+        V = _ply(folder / "batch2d" / job["output"])
+    elif door == "editor":
+        from arapkit.editor.settings import SolverSettings
+        from arapkit.editor.worker import SolveRequest, SolveWorker
+
+        updates = []
+        w = SolveWorker(updates.append)
+        w.start()
+        try:
+            w.submit(SolveRequest(m, hs.indices, hs.targets,
+                                  np.ones(m.n_vertices, np.int32),
+                                  SolverSettings(method=energy, max_iter=1000)))
+            assert w.wait_idle(300)
+        finally:
+            w.stop()
+        assert updates[-1].error is None, updates[-1].error
+        V = updates[-1].vertices
+    else:
+        torch = pytest.importorskip("torch", reason="PyTorch not installed")
+        from arapkit.torch import ARAPLayer
+
+        layer = ARAPLayer((m.vertices[:, :2], m.faces), hs.indices, energy=energy,
+                          dtype=torch.float64)
+        assert layer.planar
+        V = layer(torch.tensor(hs.targets[:, :2])).detach().numpy()
+        assert V.shape == (m.n_vertices, 2)
+        # the layer has no fold guard: it turns over what plain ARAP does (Smooth ARAP's
+        # Laplacian term folds this strip's bend; the guarded library door does not)
+        plain = Deformer(m, hs.indices, energy=energy, flips="allow").solve(
+            hs.targets, tol=1e-8, max_iter=20000)
+        _check_planar(m, hs, V, folds=plain.folds)
+        return
+    _check_planar(m, hs, V)
+
+
+def test_warp_door_2d(folder: Path, capsys):
+    """``warp_image`` and ``arapkit warp`` on the example sprite: the pins land."""
+    pytest.importorskip("pythoncdt", reason="the image extra is not installed")
+    from arapkit.cli import main
+    from arapkit.image.pins import load_pins
+    from arapkit.image.warp import ImageWarp
+
+    pins = load_pins(ROOT / "examples" / "puppet-pins.json")
+    w = ImageWarp(ROOT / "examples" / "puppet.png", pins.at)
+    res = w.frame(pins.to, pins.turned, max_iter=1000)
+    assert res.folds == 0 and np.abs(res.vertices[:len(pins.at)] - pins.to).max() < 1e-9
+    out = folder / "waved.png"
+    assert main(["warp", str(ROOT / "examples" / "puppet.png"), "--pins",
+                 str(ROOT / "examples" / "puppet-pins.json"), "-o", str(out)]) == 0
+    assert out.stat().st_size > 1000

@@ -103,8 +103,10 @@ def test_edit_without_the_editor_extra_names_it(blocked):
         (["compare", EX / "bar.off", "-H", EX / "bar.sel", "-o", "{tmp}/cmp"],
          "arapkit compare"),
         (["demo", "--out", "{tmp}/demo"], "arapkit demo"),
+        (["fit", EX / "finger.off", EX / "finger-scan.xyz", "-o", "{tmp}/out.ply",
+          "--figure", "{tmp}/f.png"], "arapkit fit --figure"),
     ],
-    ids=["deform", "deform-dry-run", "learn", "compare", "demo"],
+    ids=["deform", "deform-dry-run", "learn", "compare", "demo", "fit"],
 )
 def test_figures_without_the_plots_extra_name_it(tmp_path, args, what):
     args = [str(a).format(tmp=tmp_path) for a in args]
@@ -161,10 +163,11 @@ def test_core_dependencies_carry_no_gui_or_plotting_stack():
     assert "matplotlib" in _names(extras["plots"])
     assert {"viser", "matplotlib"} <= _names(extras["editor"])
     # all: every extra but torch (.ci/run adds it) and the test tools
-    assert extras["all"] == ["arapkit[plots,editor,batch,volume,clouds]"]
-    assert set(extras) == {"plots", "editor", "batch", "torch", "volume", "clouds", "all",
-                           "test"}
+    assert extras["all"] == ["arapkit[plots,editor,batch,volume,clouds,image]"]
+    assert set(extras) == {"plots", "editor", "batch", "torch", "volume", "clouds", "image",
+                           "all", "test"}
     assert _names(extras["clouds"]) == {"robust-laplacian"}
+    assert {"pillow", "scikit-image", "shapely", "PythonCDT"} <= _names(extras["image"])
 
 
 def test_make_installs_every_extra_and_checks_the_layers_before_pytest():
@@ -173,3 +176,15 @@ def test_make_installs_every_extra_and_checks_the_layers_before_pytest():
     recipe = make.split("\ntest:", 1)[1].split("\n\n", 1)[0].splitlines()[1:]
     assert [line.split()[0] for line in recipe] == [
         "$(BIN)/ruff", "$(BIN)/lint-imports", "$(BIN)/python"]
+
+
+_IMAGE_LINE = ("arapkit: error: arapkit warp needs the image extra: "
+               "pip install 'arapkit[image]'\n")
+
+
+@pytest.mark.parametrize("blocked", [("PIL",), ("skimage",), ("shapely",), ("pythoncdt",)])
+def test_warp_without_the_image_extra_names_it(tmp_path, blocked):
+    proc = cli_without(blocked, "warp", EX / "puppet.png", "--pins", EX / "puppet-pins.json",
+                       "-o", tmp_path / "o.png")
+    assert (proc.returncode, proc.stderr, proc.stdout) == (2, _IMAGE_LINE, "")
+    assert not (tmp_path / "o.png").exists()

@@ -436,7 +436,7 @@ def test_deform_command_on_the_scan_is_coarse_to_fine_and_accelerated(tmp_path, 
 def test_volumes_and_an_explicit_no_are_never_coarse_to_fine(monkeypatch):
     """Above the size threshold: a volume's tet graph has no surface to decimate, and the
     editor's "multires off" means off."""
-    import arapkit.methods.deformer as deformer_module
+    import arapkit.methods.dispatch as deformer_module
     from arapkit.editor.settings import SolverSettings
     from arapkit.editor.worker import SolveRequest, SolveWorker
 
@@ -552,7 +552,7 @@ def test_the_editor_starts_a_large_meshs_proxy_before_solving(big, monkeypatch):
     child while the page is set up; a volume or 'multires off' is not."""
     import dataclasses
 
-    import arapkit.methods.deformer as deformer_module
+    import arapkit.methods.dispatch as deformer_module
     from arapkit.editor.settings import SolverSettings
     from arapkit.editor.worker import SolveWorker
     from arapkit.methods.multires import coarsening_of

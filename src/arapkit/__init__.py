@@ -27,6 +27,7 @@ from .errors import InputError  # noqa: E402
 from .io import (
     HandleGroup,
     HandleSet,
+    load_groups,
     load_handles,
     load_mesh,
     load_points,
@@ -44,10 +45,12 @@ from .io import (
 )
 from .learn.fit import LearnedRings, learn_rings
 from .mesh.cloud import Graph, PointCloud
+from .mesh.groups import VertexGroups
 from .mesh.model import Mesh
 from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
 from .methods.deformer import Deformer, Result
 from .methods.dynamics import Simulator, simulate
+from .methods.fit import FitResult, Fitter, fit
 from .methods.laplacian import LaplacianEditor, laplacian_edit
 
 
@@ -69,6 +72,8 @@ del _installed_version
 __all__ = [
     "BoundingBox",
     "Deformer",
+    "FitResult",
+    "Fitter",
     "HandleGroup",
     "HandleSet",
     "InputError",
@@ -80,11 +85,14 @@ __all__ = [
     "Result",
     "Simulator",
     "UpGuess",
+    "VertexGroups",
     "__version__",
     "bounding_box",
+    "fit",
     "guess_up",
     "laplacian_edit",
     "learn_rings",
+    "load_groups",
     "load_handles",
     "load_mesh",
     "load_points",

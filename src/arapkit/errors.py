@@ -30,7 +30,11 @@ class InputError(ValueError):
 INTERFACES = ("python", "cli", "editor", "blender")
 
 
-def option(name: str, value: str, interface: str = "python") -> str:
+#: the editor's controls for options that are not in its Solver panel
+EDITOR_CONTROLS = {"rings": "Global r {value} in the Rigidity panel"}
+
+
+def option(name: str, value: str | int, interface: str = "python") -> str:
     """How a user sets option ``name`` to ``value`` in the given interface.
 
     Examples
@@ -41,11 +45,15 @@ def option(name: str, value: str, interface: str = "python") -> str:
     "weights 'cotan-clamped' in the Solver panel"
     >>> option("weights", "cotan-clamped", "blender")
     "Weights 'cotan-clamped' in the ARAP Deform panel"
+    >>> option("rings", 4), option("rings", 4, "cli"), option("rings", 4, "editor")
+    ('rings=4', '--rings 4', 'Global r 4 in the Rigidity panel')
     """
     if interface == "cli":
         return f"--{name.replace('_', '-')} {value}"
     if interface == "editor":
-        return f"{name} '{value}' in the Solver panel"
+        control = EDITOR_CONTROLS.get(name)
+        return (control.format(value=value) if control
+                else f"{name} '{value}' in the Solver panel")
     if interface == "blender":
         return f"{name.replace('_', ' ').capitalize()} '{value}' in the ARAP Deform panel"
     return f"{name}={value!r}"
@@ -67,14 +75,14 @@ class Advice(str):
     'the shape drifts; use --weights cotan-clamped'
     """
 
-    def __new__(cls, template: str, **options: str) -> Advice:
+    def __new__(cls, template: str, **options: str | int) -> Advice:
         self = super().__new__(cls, cls._fill(template, options, "python"))
         self._template = template
         self._options = options
         return self
 
     @staticmethod
-    def _fill(template: str, options: dict[str, str], interface: str) -> str:
+    def _fill(template: str, options: dict[str, str | int], interface: str) -> str:
         return template.format(**{k: option(k, v, interface) for k, v in options.items()})
 
     def worded_for(self, interface: str) -> str:

@@ -18,6 +18,7 @@ from ..errors import InputError
 from ..validate import iteration_cap, tolerance
 from .accel import Anderson
 from .constraints import rigid_motion
+from .rotations2d import follow_in_plane, rigid_motion_2d
 
 __all__ = ["ROUNDOFF_ULPS", "Result", "energy_floor", "local_global", "rigid_start",
            "start_energy", "with_progress"]
@@ -39,11 +40,16 @@ class Result:
     iterations : number of iterations run.
     converged : whether the relative-decrease test held or the energy reached round-off
         (:func:`energy_floor`), rather than ``max_iter`` or a stop.
-    rotations : (n, 3, 3) fitted R_k (None for methods without per-vertex rotations).
+    rotations : (n, 3, 3) fitted R_k (None for methods without per-vertex rotations);
+        (n, 2, 2) for a planar solve.
     timings : neighbourhood_ms, factorisation_ms, global_ms_per_iter, local_ms_per_iter,
         iterations, total_s.
     vertex_energy : (n,) each vertex's term of the energy. Computed on first access:
         interactive callers that discard superseded results skip its cost.
+    folds : int or None
+        For a planar (2D) solve: how many triangles are turned over relative to the rest
+        shape (0 unless the pins admit no fold-free map, :mod:`arapkit.arap.flips`); None
+        in 3D.
     """
 
     vertices: np.ndarray
@@ -55,6 +61,7 @@ class Result:
     timings: dict[str, float] = field(default_factory=dict)
     _vertex_energy: np.ndarray | Callable[[], np.ndarray] | None = field(default=None,
                                                                           repr=False)
+    folds: int | None = None
 
     @property
     def vertex_energy(self) -> np.ndarray:
@@ -115,14 +122,19 @@ def rigid_start(problem, targets: np.ndarray) -> np.ndarray | None:
     >>> rigid_start(p, V[:3] * 2 / s) is None  # stretched: not rigid
     True
     """
-    rest = problem.caller_graph.vertices
+    d = problem.dim
+    rest = problem.caller_graph.vertices[:, :d]
     X = rest[problem.handles]
-    if len(X) < 3:
+    if len(X) < d:
         return None
     sv = np.linalg.svd(X - X.mean(axis=0), compute_uv=False)
-    if sv[1] <= 1e-6 * sv[0]:  # collinear: the rotation about the line is undetermined
+    # collinear in 3D (coincident in 2D): the rotation about the line is undetermined
+    if sv[d - 2] <= 1e-6 * sv[0] or sv[0] == 0:
         return None
-    R, t = rigid_motion(X, targets)
+    if d == 2:
+        R, t = rigid_motion_2d(X, targets)
+    else:
+        R, t = rigid_motion(X, targets)
     size = max(1.0, float(np.abs(targets).max()), float(np.abs(X).max()))
     if np.abs(X @ R.T + t - targets).max() > math.sqrt(_EPS) * size:
         return None
@@ -154,14 +166,16 @@ def with_progress(callback, progress):
 
 
 def start_energy(problem, backend, start: np.ndarray, units: float, C: np.ndarray,
-                 R: np.ndarray, R_prev: np.ndarray) -> tuple[np.ndarray, float]:
+                 R: np.ndarray, R_prev: np.ndarray, snap: bool = True
+                 ) -> tuple[np.ndarray, float]:
     """A solve's start: ``start / units`` in the problem's order with the handles snapped
     to ``C``, and its energy at the best rotations (written to ``R``).
 
     Handles are snapped before the first fit, as libigl does, so the first rotations
-    already see the new targets. A coupled energy's first fit reads identity rotations in
-    ``R_prev`` (empty for the others). Returns the positions and the energy in the
-    problem's units.
+    already see the new targets (``snap=False`` leaves them where ``start`` has them: a
+    flip guard moves them there itself). A coupled energy's first fit reads identity
+    rotations in ``R_prev`` (empty for the others). Returns the positions and the energy
+    in the problem's units.
 
     Examples
     --------
@@ -179,14 +193,15 @@ def start_energy(problem, backend, start: np.ndarray, units: float, C: np.ndarra
     # permuted and scaled in one new array: a scaled copy of the whole start as well
     # would be one more shape alive through the solve (40 MB at 1.75M vertices)
     P = np.asarray(start, dtype=np.float64)[problem.perm] / units
-    P[problem.elimination.constrained] = C
-    R_prev[:] = np.eye(3)
+    if snap:
+        P[problem.elimination.constrained] = C
+    R_prev[:] = np.eye(problem.dim)
     return P, backend.local(P, R, R_prev)
 
 
 def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None, *,
                  tol: float, max_iter: int, callback=None, accelerate: bool = False,
-                 history: int = 5, progress=None) -> Result:
+                 history: int = 5, progress=None, guard=None) -> Result:
     """Run the local/global iteration on a bound backend.
 
     Parameters
@@ -198,6 +213,12 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         with identity rotations (the paper).
     tol, max_iter, callback, accelerate, history, progress :
         As for :meth:`arapkit.Deformer.solve`.
+    guard : FlipGuard, optional
+        A planar problem's flip guard (:mod:`arapkit.arap.flips`): each global step is
+        shortened to keep every triangle unfolded, and ``Result.folds`` is counted.
+
+    A problem with ``dim == 2`` runs in two columns throughout (targets ``(h, 2)``,
+    rotations 2 x 2).
 
     Positions cross this boundary in the caller's units and are divided by
     ``problem.scale`` (a power of two, so exactly) inside; results, energies and what the
@@ -237,32 +258,49 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
     free, cons = el.free, el.constrained
     inv = problem.iperm
     nf = len(free)
+    d = problem.dim
     C = problem.constrained_targets(targets)
-    fixed_rhs = np.ascontiguousarray(el.A_fc @ C) if nf else np.zeros((0, 3))
+
+    def coupling(C_held: np.ndarray) -> np.ndarray:
+        return np.ascontiguousarray(el.A_fc @ C_held) if nf else np.zeros((0, d))
+
     coupled = problem.energy.coupling is not None
     # a rotation per owner: the vertices first, then any of their own (triangles)
     K = problem.energy.n_owners
-    R = np.empty((K, 3, 3))
-    R_prev = np.empty((K, 3, 3)) if coupled else np.empty((0, 3, 3))
-    rhs = np.empty((nf, 3))
+    R = np.empty((K, d, d))
+    R_prev = np.empty((K, d, d)) if coupled else np.empty((0, d, d))
+    rhs = np.empty((nf, d))
     E_prev = None
     t_global = t_local = t_accel = 0.0
     if start is None:
-        P = problem.vertices.copy()
-        R[:] = np.eye(3)
-        P[cons] = C
-        rhs[:] = problem.b_rest[free] - fixed_rhs
+        P = problem.rest_positions.copy()
+        R[:] = np.eye(d)
+        if guard is None or guard.begin(P, cons, C):
+            P[cons] = C
+        C_held = C if guard is None else guard.now  # travelling pins: where they are
+        fixed_rhs = coupling(C_held)
+        rhs[:] = problem.b_rest[free, :d] - fixed_rhs
     else:
         t0 = time.perf_counter()
-        P, E_prev = start_energy(problem, backend, start, start_units, C, R, R_prev)
+        snap = True
+        if guard is not None:
+            P0 = np.asarray(start, dtype=np.float64)[problem.perm] / start_units
+            snap = guard.begin(P0, cons, C)
+            start, start_units = P0[inv], 1.0
+        C_held = C if guard is None else guard.now
+        fixed_rhs = coupling(C_held)
+        P, E_prev = start_energy(problem, backend, start, start_units, C, R, R_prev, snap)
+        if guard is not None:
+            E_prev += guard.barrier(P)
         check_finite(E_prev, 0)
         backend.rhs(fixed_rhs, rhs)
         t_local += time.perf_counter() - t0
-    aa = Anderson(3 * nf, history) if accelerate and nf else None
+    aa = Anderson(d * nf, history) if accelerate and nf else None
     x = np.ascontiguousarray(P[free])  # current iterate (free vertices)
-    g = np.empty((nf, 3))
-    x_aa = np.empty((nf, 3))
+    g = np.empty((nf, d))
+    x_aa = np.empty((nf, d))
     hist: list[float] = []
+    landed_at = 0
     converged = False
     rejected = 0
     plain_next = False
@@ -273,20 +311,31 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         t0 = time.perf_counter()
         if nf:
             backend.solve(rhs, g)  # g = G(x)
+        if guard is not None:  # the guarded step (module flips)
+            guard.limit(P, g, free, cons, C, E_prev, R_prev)
+            if guard.now is not C_held:  # travelling pins moved on
+                C_held = guard.now
+                fixed_rhs = coupling(C_held)
+                E_prev = None  # another problem: no comparison across the move
+                landed_at = it if guard.landed else 0
         t1 = time.perf_counter()
         t_global += t1 - t0
         if coupled:  # the rotation coupling reads the last iteration's rotations
             R, R_prev = R_prev, R
         E = None
         accelerated = False
-        if aa is not None and E_prev is not None:
+        # while pins travel to their targets the map changes each step: no extrapolation
+        if aa is not None and E_prev is not None and (guard is None or guard.landed):
             y = aa.step(x, g, x_aa)
             t2 = time.perf_counter()
             t_accel += t2 - t1
             if y is not None and not plain_next:
                 backend.scatter(x_aa, free, P)
                 E_try = backend.local(P, R, R_prev)
-                if E_try < E_prev:  # safeguard: keep only energy-lowering extrapolations
+                if guard is not None:
+                    E_try += guard.barrier(P)
+                # safeguard: keep only energy-lowering (and, guarded, fold-free) extrapolations
+                if E_try < E_prev and (guard is None or guard.admits(P)):
                     accelerated = True
                     E = E_try
                     x, x_aa = x_aa, x
@@ -297,6 +346,8 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         if E is None:
             backend.scatter(g, free, P)
             E = backend.local(P, R, R_prev)
+            if guard is not None:
+                E += guard.barrier(P)
             if aa is not None:
                 x, g = g, x
         if it < max_iter:
@@ -310,7 +361,8 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         # only a plain step can end the solve: an extrapolation that barely lowers the energy
         # (a stalled history) says nothing about the fixed point; kept as the end, it ended
         # volumetric solves 16-58 % above the energy the plain steps went on to reach
-        if abs(E) <= floor or (small and not accelerated):
+        if (abs(E) <= floor or (small and not accelerated)) and (guard is None
+                                                                  or guard.landed):
             converged = True
         plain_next = small and accelerated
         E_prev = E
@@ -340,12 +392,20 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         return backend.vertex_energy(P, R)[inv] * s2
 
     hist = [E * s2 for E in hist]
+    folds = None if guard is None else guard.folds(P)
+    if guard is not None and guard.released:
+        timings["flip_guard_released"] = 1
+    if guard is not None and landed_at:
+        timings["pins_landed_at"] = landed_at  # the pins travelled: history index of landing
     V, Rv = P[inv], R[inv]
     if problem.free_components == "follow" and len(problem.fixed_extra):
         # components without handles: energy 0 at rest and under any rigid motion; place
         # them with their neighbours rather than leave them behind
-        problem.followers.apply(V, Rv)
+        if d == 3:
+            problem.followers.apply(V, Rv)
+        else:
+            V, Rv = follow_in_plane(problem.followers, V, Rv)
     V *= s
     if not np.isfinite(V).all():
         check_finite(math.nan, it)
-    return Result(V, hist[-1], hist, it, converged, Rv, timings, vertex_energy)
+    return Result(V, hist[-1], hist, it, converged, Rv, timings, vertex_energy, folds=folds)

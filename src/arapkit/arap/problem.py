@@ -28,7 +28,6 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import Advice, InputError
-from ..mesh.cloud import as_shape
 from ..mesh.weights import SOUND_WEIGHTS
 from .constraints import (
     Elimination,
@@ -90,12 +89,15 @@ class ARAPProblem:
     timings: dict[str, float] = field(default_factory=dict, repr=False)
     #: the power of two the positions are divided by inside (see :func:`unit_scale`)
     scale: float = 1.0
+    #: 2 for a planar shape solved in its plane (2 x 2 rotations, ``(n, 2)`` positions and
+    #: targets, :mod:`arapkit.arap.backends.planar`), else 3
+    dim: int = 3
 
     # -- construction --------------------------------------------------------------
     @classmethod
     def from_mesh(cls, mesh: Mesh | PointCloud, handles, energy="rring",
                   weights: str | None = None, *, rings=1, free_components: str = "follow",
-                  reorder: bool = True, **energy_options) -> ARAPProblem:
+                  reorder: bool = True, dim: int = 3, **energy_options) -> ARAPProblem:
         """Precompute ARAP on a triangle mesh or a point cloud's graph.
 
         Parameters
@@ -117,6 +119,9 @@ class ARAPProblem:
             r per vertex for ``energy="rring"``.
         free_components, reorder :
             As for :class:`arapkit.Deformer`.
+        dim : {3, 2}
+            2 solves a planar mesh (one z, or ``(n, 2)`` positions) in its plane: targets
+            and results are ``(n, 2)``, rotations 2 x 2 (see :mod:`arapkit.mesh.planar`).
         **energy_options :
             Options of the energy (e.g. ``sr_alpha``).
 
@@ -130,12 +135,20 @@ class ARAPProblem:
         >>> ARAPProblem.from_mesh(PointCloud(bar().vertices), [0, 1]).weights_kind
         'gaussian'
         """
+        from ..mesh.planar import PlanarInput
+
         t0 = time.perf_counter()
-        shape = as_shape(mesh)
+        if dim not in (2, 3):
+            raise InputError(f"dim: expected 2 or 3, got {dim!r}")
+        planar = PlanarInput.of_shape(mesh)  # a mesh, or a point cloud (never planar)
+        shape = planar.mesh
+        if dim == 2 and not planar.planar:
+            raise InputError(f"{shape.name}: dim=2 needs a planar mesh (one z for every "
+                             "vertex, or (n, 2) positions)")
         dom = domain_of(shape)
         w, kind = dom.edge_weights(shape, weights)
         return cls._build(dom.graph(shape), w, kind, handles, energy, rings,
-                          free_components, reorder, energy_options, t0)
+                          free_components, reorder, energy_options, t0, dim)
 
     @classmethod
     def from_graph(cls, vertices, edges, weights, handles, *, rings=1, name: str = "graph",
@@ -178,7 +191,7 @@ class ARAPProblem:
 
     @classmethod
     def _build(cls, graph: EdgeGraph, w, kind, handles, energy, rings, free_components,
-               reorder, energy_options, t0) -> ARAPProblem:
+               reorder, energy_options, t0, dim: int = 3) -> ARAPProblem:
         n = graph.n_vertices
         # the problem lives in units of a power of two near the extent: exact, and every
         # tolerance inside becomes relative to the mesh's own size
@@ -188,8 +201,9 @@ class ARAPProblem:
         perm = bandwidth_order(graph) if reorder and n > 1 else np.arange(n, dtype=np.int64)
         iperm = np.empty(n, dtype=np.int64)
         iperm[perm] = np.arange(n)
+        # a planar solve keeps the triangles: its flip guard reads their orientation
         inner = graph.permuted(perm, iperm,
-                               faces=energy_info(energy).faces_needed(energy_options))
+                               faces=dim == 2 or energy_info(energy).faces_needed(energy_options))
         setup_ms = 1e3 * (time.perf_counter() - t0)
         h, extra, notes = cls._constraints(graph, handles, free_components)
         rings = check_rings(rings, n)
@@ -201,7 +215,7 @@ class ARAPProblem:
                 f"{s:.3g}: the deformation energy overflows); rescale the mesh"
             )
         p = cls(inner, perm, iperm, w, kind, en, h, extra, notes, free_components, graph,
-                scale=s)
+                scale=s, dim=dim)
         p.timings["neighbourhood_ms"] = setup_ms + 1e3 * (time.perf_counter() - t1)
         return p
 
@@ -211,12 +225,51 @@ class ARAPProblem:
         extra, notes = anchor_components(graph, h, policy)
         return h, extra, notes
 
-    def with_handles(self, handles) -> ARAPProblem:
-        """The same problem with a new handle set (refactorises on first use)."""
+    def with_handles(self, handles, *, update_factor: bool = False) -> ARAPProblem:
+        """The same problem with a new handle set (refactorises on first use).
+
+        ``update_factor=True`` keeps this problem's factor instead and solves the new
+        constrained set through a low-rank correction of it
+        (:class:`arapkit.arap.pinupdate.UpdatedElimination`): adding or removing a few
+        handles then costs a few solves, not a factorisation.
+        """
         h, extra, notes = self._constraints(self.caller_graph, handles, self.free_components)
-        return replace(self, handles=h, fixed_extra=extra, notes=notes,
-                       timings={k: v for k, v in self.timings.items()
-                                if k != "factorisation_ms"})
+        new = replace(self, handles=h, fixed_extra=extra, notes=notes,
+                      timings={k: v for k, v in self.timings.items()
+                               if k != "factorisation_ms"})
+        if update_factor and self.factorised:
+            from .pinupdate import UpdatedElimination
+
+            t0 = time.perf_counter()
+            upd = UpdatedElimination.update(self.elimination, self.edges, self.energy.system_w,
+                                            self.iperm[new.constrained], self.name)
+            if upd is not None:
+                new.__dict__["elimination"] = upd  # the cached property, filled
+                new.timings["update_ms"] = 1e3 * (time.perf_counter() - t0)
+        return new
+
+    def with_dim(self, dim: int) -> ARAPProblem:
+        """The same problem solved in ``dim`` dimensions (a planar problem in 3D, or back),
+        sharing the factor: the Laplacian does not depend on the dimension.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float)
+        >>> p = ARAPProblem.from_mesh((V, [[0, 1, 2]]), [0], dim=2)
+        >>> _ = p.elimination
+        >>> q = p.with_dim(3)
+        >>> q.dim, q.elimination is p.elimination
+        (3, True)
+        """
+        if dim == self.dim:
+            return self
+        if dim == 2 and self.graph.faces is None:
+            raise InputError(f"{self.name}: dim=2 needs the triangles of a planar mesh")
+        new = replace(self, dim=dim)
+        if self.factorised:
+            new.__dict__["elimination"] = self.elimination
+        return new
 
     def with_energy(self, energy: NeighbourhoodEnergy, build_ms: float = 0.0) -> ARAPProblem:
         """The same graph and handles with another energy (e.g. a new rigidity map)."""
@@ -237,7 +290,7 @@ class ARAPProblem:
         t0 = time.perf_counter()
         r = check_rings(rings, self.n_vertices)
         # the energy's own options (a ring scale) hold for the new map too
-        en = make_energy("rring", self.graph, self.w, self.weights_kind, rings=r,
+        en = make_energy(self.energy.name, self.graph, self.w, self.weights_kind, rings=r,
                          perm=self.perm, **self.energy.options)
         return self.with_energy(en, 1e3 * (time.perf_counter() - t0))
 
@@ -257,10 +310,12 @@ class ARAPProblem:
         """Rest positions, internal numbering."""
         return self.graph.vertices
 
-    @property
+    @cached_property
     def edges(self) -> np.ndarray:
-        """Edges, internal numbering."""
-        return self.graph.edges
+        """The pairs the energy's terms couple, internal numbering: the graph's edges, then
+        any the energy adds past them (:attr:`NeighbourhoodEnergy.extra_edges`)."""
+        extra = self.energy.extra_edges
+        return self.graph.edges if extra is None else np.concatenate([self.graph.edges, extra])
 
     @cached_property
     def constrained(self) -> np.ndarray:
@@ -309,8 +364,15 @@ class ARAPProblem:
         self.__dict__.pop("elimination", None)
 
     def constrained_targets(self, targets: np.ndarray) -> np.ndarray:
-        """Positions of :attr:`constrained` for given handle targets (anchors at rest)."""
-        return np.concatenate([targets, self.caller_graph.vertices[self.fixed_extra]])
+        """Positions of :attr:`constrained` for given handle targets (anchors at rest);
+        ``(c, dim)``."""
+        rest = self.caller_graph.vertices[self.fixed_extra]
+        return np.concatenate([targets, rest[:, :self.dim]])
+
+    @cached_property
+    def rest_positions(self) -> np.ndarray:
+        """Rest positions in the solve's ``dim`` columns (internal numbering)."""
+        return np.ascontiguousarray(self.vertices[:, :self.dim])
 
     @cached_property
     def b_rest(self) -> np.ndarray:

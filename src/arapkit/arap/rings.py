@@ -19,6 +19,9 @@ grouped by v is kept.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from contextvars import ContextVar
 from dataclasses import dataclass
 
 import numba as nb
@@ -27,13 +30,17 @@ import numpy as np
 from ..mesh.model import Mesh
 from ..mesh.topology import vertex_adjacency
 from ..validate import MAX_RINGS, ring_sizes
+from .ringcost import RingCost, check_ring_memory
 
 __all__ = [
     "MAX_RINGS",
+    "BuildCancelled",
     "Neighbourhoods",
     "build_neighbourhoods",
     "check_rings",
+    "edge_counts",
     "neighbourhoods_from_arrays",
+    "ring_progress",
     "rings_summary",
     "vertex_adjacency",
 ]
@@ -44,36 +51,42 @@ check_rings = ring_sizes
 
 
 @nb.njit(cache=True, nogil=True)
-def _bfs(k, r, adj_ptr, adj_nbr, adj_eid, vstamp, depth, estamp, queue, vout, eout, lout):
+def _bfs(k, stamp_k, r, adj_ptr, adj_nbr, adj_eid, stamp, depth, pos, queue, vout, eout,
+         lout):
     """BFS from k; write disk vertices to vout and (edge, layer) to eout/lout; return counts.
 
-    With ``vout`` of length 0 only counts are returned.
+    With ``vout`` of length 0 only counts are returned. ``stamp_k`` marks what this search
+    visited (distinct per search, so the thread's scratch needs no clearing). An edge is
+    recorded from whichever end leaves the queue first (``pos``: place in the queue), with
+    layer ``1 + depth`` of that end: no per-edge scratch.
     """
     write = len(vout) > 0
-    vstamp[k] = k
+    stamp[k] = stamp_k
     depth[k] = 0
+    pos[k] = 0
     queue[0] = k
     head, tail, ne = 0, 1, 0
     while head < tail:
         u = queue[head]
+        pu = head
         head += 1
         d = depth[u]
         if d >= r:
             continue
         for t in range(adj_ptr[u], adj_ptr[u + 1]):
-            e = adj_eid[t]
-            if estamp[e] != k:
-                estamp[e] = k
-                if write:
-                    eout[ne] = e
-                    lout[ne] = d + 1
-                ne += 1
             v = adj_nbr[t]
-            if vstamp[v] != k:
-                vstamp[v] = k
+            if stamp[v] != stamp_k:
+                stamp[v] = stamp_k
                 depth[v] = d + 1
+                pos[v] = tail
                 queue[tail] = v
                 tail += 1
+            elif pos[v] < pu:  # v left the queue first: the edge is recorded already
+                continue
+            if write:
+                eout[ne] = adj_eid[t]
+                lout[ne] = d + 1
+            ne += 1
     if write:
         for t in range(tail):
             vout[t] = queue[t]
@@ -81,53 +94,68 @@ def _bfs(k, r, adj_ptr, adj_nbr, adj_eid, vstamp, depth, estamp, queue, vout, eo
 
 
 @nb.njit(parallel=True, cache=True, nogil=True)
-def _count(n, n_edges, rings, adj_ptr, adj_nbr, adj_eid, n_chunks):
-    nv = np.zeros(n, dtype=np.int64)
-    ne = np.zeros(n, dtype=np.int64)
-    size = (n + n_chunks - 1) // n_chunks
+def _count(lo, hi, rings, adj_ptr, adj_nbr, adj_eid, scratch, nv, ne):
+    """Ring sizes of vertices lo..hi-1 into ``nv`` (disk) and ``ne`` (edges)."""
+    n_chunks = 4 * scratch.shape[1]
+    size = (hi - lo + n_chunks - 1) // n_chunks
+    dummy_i = np.empty(0, dtype=np.int32)
+    dummy_l = np.empty(0, dtype=np.int8)
     for c in nb.prange(n_chunks):
-        vstamp = np.full(n, -1, dtype=np.int32)
-        estamp = np.full(n_edges, -1, dtype=np.int32)
-        depth = np.empty(n, dtype=np.int32)
-        queue = np.empty(n, dtype=np.int32)
-        dummy_i = np.empty(0, dtype=np.int32)
-        dummy_l = np.empty(0, dtype=np.int8)
-        for k in range(c * size, min(n, (c + 1) * size)):
-            a, b = _bfs(k, rings[k], adj_ptr, adj_nbr, adj_eid, vstamp, depth, estamp, queue,
-                        dummy_i, dummy_i, dummy_l)
+        t = nb.get_thread_id()
+        for k in range(lo + c * size, min(hi, lo + (c + 1) * size)):
+            a, b = _bfs(k, k, rings[k], adj_ptr, adj_nbr, adj_eid, scratch[0, t],
+                        scratch[1, t], scratch[2, t], scratch[3, t], dummy_i, dummy_i, dummy_l)
             nv[k] = a
             ne[k] = b
-    return nv, ne
 
 
 @nb.njit(parallel=True, cache=True, nogil=True)
-def _fill(n, rings, adj_ptr, adj_nbr, adj_eid, edges, W, vptr, eptr, n_chunks,
+def _fill(lo, hi, rings, adj_ptr, adj_nbr, adj_eid, edges, W, vptr, eptr, scratch,
           disk_idx, disk_coef, edge_idx, edge_layer):
-    size = (n + n_chunks - 1) // n_chunks
-    n_edges = len(edges)
+    """Write the rings of vertices lo..hi-1 and their coefficients ``c_kv``."""
+    n = len(rings)
+    n_chunks = 4 * scratch.shape[1]
+    size = (hi - lo + n_chunks - 1) // n_chunks
     for c in nb.prange(n_chunks):
-        vstamp = np.full(n, -1, dtype=np.int32)
-        estamp = np.full(n_edges, -1, dtype=np.int32)
-        depth = np.empty(n, dtype=np.int32)
-        queue = np.empty(n, dtype=np.int32)
-        slot = np.empty(n, dtype=np.int64)
-        for k in range(c * size, min(n, (c + 1) * size)):
+        t = nb.get_thread_id()
+        slot = scratch[4, t]  # a disk vertex's place in its disk
+        for k in range(lo + c * size, min(hi, lo + (c + 1) * size)):
             v0, v1 = vptr[k], vptr[k + 1]
             e0, e1 = eptr[k], eptr[k + 1]
-            _bfs(k, rings[k], adj_ptr, adj_nbr, adj_eid, vstamp, depth, estamp, queue,
-                 disk_idx[v0:v1], edge_idx[e0:e1], edge_layer[e0:e1])
-            for t in range(v0, v1):
-                slot[disk_idx[t]] = t
-                disk_coef[t, 0] = 0.0
-                disk_coef[t, 1] = 0.0
-                disk_coef[t, 2] = 0.0
-            for t in range(e0, e1):
-                e = edge_idx[t]
-                si = slot[edges[e, 0]]
-                sj = slot[edges[e, 1]]
+            # stamps past the counting pass's (k): this search starts from clean marks
+            _bfs(k, n + k, rings[k], adj_ptr, adj_nbr, adj_eid, scratch[0, t], scratch[1, t],
+                 scratch[2, t], scratch[3, t], disk_idx[v0:v1], edge_idx[e0:e1],
+                 edge_layer[e0:e1])
+            for q in range(v0, v1):
+                slot[disk_idx[q]] = q - v0
+                disk_coef[q, 0] = 0.0
+                disk_coef[q, 1] = 0.0
+                disk_coef[q, 2] = 0.0
+            for q in range(e0, e1):
+                e = edge_idx[q]
+                si = v0 + slot[edges[e, 0]]
+                sj = v0 + slot[edges[e, 1]]
                 for a in range(3):
                     disk_coef[si, a] += W[e, a]
                     disk_coef[sj, a] -= W[e, a]
+
+
+@nb.njit(cache=True, nogil=True)
+def edge_counts(edge_idx, m):
+    """d_e: how many neighbourhoods hold each edge of ``edge_idx`` (ids below ``m``).
+
+    ``np.bincount`` would first copy ``edge_idx`` to int64 (4.3 GiB for r = 100 on a
+    13K-vertex mesh); this counts in place.
+
+    Examples
+    --------
+    >>> edge_counts(np.array([0, 2, 2], dtype=np.int32), 3).tolist()
+    [1, 0, 2]
+    """
+    out = np.zeros(m, dtype=np.int64)
+    for q in range(len(edge_idx)):
+        out[edge_idx[q]] += 1
+    return out
 
 
 @dataclass
@@ -178,12 +206,12 @@ class Neighbourhoods:
         return np.diff(self.edge_ptr)
 
 
-def _chunks(n: int) -> int:
-    return max(1, min(n, 4 * nb.get_num_threads()))
-
-
 def build_neighbourhoods(mesh: Mesh, weights: np.ndarray, rings) -> Neighbourhoods:
     """Breadth-first search of N(k, r_k) for every vertex, compiled and parallel.
+
+    Refused in one line where the estimated memory exceeds what is available
+    (:func:`arapkit.arap.ringcost.check_ring_memory`); reports progress to the callback of
+    :func:`ring_progress`.
 
     Parameters
     ----------
@@ -204,15 +232,68 @@ def build_neighbourhoods(mesh: Mesh, weights: np.ndarray, rings) -> Neighbourhoo
     """
     n = mesh.n_vertices
     return neighbourhoods_from_arrays(n, mesh.edges, mesh.vertices, weights,
-                                      check_rings(rings, n))
+                                      check_rings(rings, n), name=mesh.name)
+
+
+class BuildCancelled(Exception):
+    """A ring build stopped because its progress callback asked it to (nothing was kept)."""
+
+
+#: the progress callback of ring builds in this thread (see :func:`ring_progress`)
+_PROGRESS: ContextVar[Callable[[float, RingCost], bool | None] | None] = ContextVar(
+    "arapkit_ring_progress", default=None)
+#: builds estimated shorter than this run in one piece, without progress reports
+PROGRESS_FROM_S = 0.5
+#: the share of a build's time its counting pass takes (measured: 0.2-0.3)
+_COUNT_SHARE = 0.25
+
+
+@contextmanager
+def ring_progress(callback: Callable[[float, RingCost], bool | None]) -> Iterator[None]:
+    """Report the progress of the ring builds run inside the block (this thread only).
+
+    ``callback(fraction, cost)`` is called with the fraction done (0 at the start, 1 at
+    the end) and the build's :class:`~arapkit.arap.ringcost.RingCost`, a few times a
+    second, for builds estimated at :data:`PROGRESS_FROM_S` or longer; a true return value
+    cancels the build (:class:`BuildCancelled`). The command line shows a tqdm bar with it,
+    the editor its progress bar.
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar
+    >>> from arapkit.mesh.weights import edge_weights
+    >>> m = bar()
+    >>> seen = []
+    >>> with ring_progress(lambda f, cost: seen.append(f)):
+    ...     _ = build_neighbourhoods(m, edge_weights(m), 3)
+    >>> seen  # a build this short runs in one piece
+    []
+    """
+    token = _PROGRESS.set(callback)
+    try:
+        yield
+    finally:
+        _PROGRESS.reset(token)
+
+
+def _blocks(n: int, seconds: float) -> np.ndarray:
+    """Vertex ranges of about a tenth of a second each (one range for a short build)."""
+    count = 1 if seconds < PROGRESS_FROM_S else int(min(n, max(4, seconds / 0.1), 2000))
+    return np.linspace(0, n, count + 1).astype(np.int64)
 
 
 def neighbourhoods_from_arrays(
-    n: int, edges: np.ndarray, P: np.ndarray, weights: np.ndarray, rings: np.ndarray
+    n: int, edges: np.ndarray, P: np.ndarray, weights: np.ndarray, rings: np.ndarray,
+    *, name: str = "graph", cost: RingCost | None = None,
 ) -> Neighbourhoods:
     """:func:`build_neighbourhoods` on raw arrays (any vertex numbering, e.g. a reordering).
 
-    ``edges`` need not be sorted; edge ids in the result index its rows.
+    ``edges`` need not be sorted; edge ids in the result index its rows. ``cost``: the
+    estimate already checked by the caller (:func:`arapkit.arap.ringcost.check_ring_memory`);
+    without it the build checks its own, naming ``name`` in a refusal.
+
+    The build holds the finished structure, the per-vertex counts and one scratch row per
+    thread, no more: it counts every ring first, then writes each into its place.
 
     Examples
     --------
@@ -224,21 +305,43 @@ def neighbourhoods_from_arrays(
     """
     E = np.asarray(edges)
     r = np.asarray(rings, dtype=np.int32)
+    if cost is None:
+        cost = check_ring_memory(n, E, r, name)
     ptr, nbr, eid = vertex_adjacency(n, E)
-    nch = _chunks(n)
-    nv, ne = _count(n, len(E), r, ptr, nbr, eid, nch)
+    threads = nb.get_num_threads()
+    scratch = np.empty((5, threads, n), dtype=np.int32)
+    scratch[0] = -1  # stamps: a search marks what it visited with its own number
+    blocks = _blocks(n, cost.seconds)
+    report = _PROGRESS.get() if len(blocks) > 2 else None
+
+    def step(fraction: float) -> None:
+        if report is not None and report(fraction, cost):
+            raise BuildCancelled(f"{name}: the r-ring build was cancelled")
+
+    step(0.0)
+    nv = np.empty(n, dtype=np.int64)
+    ne = np.empty(n, dtype=np.int64)
+    for b in range(len(blocks) - 1):
+        _count(blocks[b], blocks[b + 1], r, ptr, nbr, eid, scratch, nv, ne)
+        step(_COUNT_SHARE * blocks[b + 1] / n)
     vptr = np.zeros(n + 1, dtype=np.int64)
     eptr = np.zeros(n + 1, dtype=np.int64)
     np.cumsum(nv, out=vptr[1:])
     np.cumsum(ne, out=eptr[1:])
+    del nv, ne
     W = np.ascontiguousarray(weights[:, None] * (P[E[:, 0]] - P[E[:, 1]]))
     disk_idx = np.empty(vptr[-1], dtype=np.int32)
     disk_coef = np.empty((vptr[-1], 3), dtype=np.float64)
     edge_idx = np.empty(eptr[-1], dtype=np.int32)
     edge_layer = np.empty(eptr[-1], dtype=np.int8)
-    _fill(n, r, ptr, nbr, eid, E, W, vptr, eptr, nch, disk_idx, disk_coef, edge_idx,
-          edge_layer)
-    count = np.bincount(edge_idx, minlength=len(E))
+    for b in range(len(blocks) - 1):
+        _fill(blocks[b], blocks[b + 1], r, ptr, nbr, eid, E, W, vptr, eptr, scratch,
+              disk_idx, disk_coef, edge_idx, edge_layer)
+        # the fill's share by entries written: a per-vertex map's large rings take longer
+        done = eptr[blocks[b + 1]] / max(int(eptr[-1]), 1)
+        step(_COUNT_SHARE + (1.0 - _COUNT_SHARE) * done)
+    del scratch
+    count = edge_counts(edge_idx, len(E))
     return Neighbourhoods(r, eptr, edge_idx, edge_layer, vptr, disk_idx, disk_coef, count)
 
 

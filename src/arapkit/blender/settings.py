@@ -9,7 +9,7 @@ library's default.
 Examples
 --------
 >>> [name for name, label, _ in method_items()]
-['rring', 'spokes-and-rims', 'sr-arap']
+['rring', 'spokes-and-rims', 'sr-arap', 'smooth-arap']
 >>> takes_rigidity_map("sr-arap")
 False
 >>> weight_items()[0][0]

@@ -40,6 +40,8 @@ COMMANDS: list[tuple[str, str]] = [
     ("edit", "arapkit.cli.edit"),
     ("batch", "arapkit.cli.batch"),
     ("simulate", "arapkit.cli.simulate"),
+    ("warp", "arapkit.cli.warp"),
+    ("fit", "arapkit.cli.fit"),
 ]
 
 _EPILOG = """examples (from a clone of the repository, which ships examples/):

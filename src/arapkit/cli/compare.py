@@ -17,6 +17,7 @@ from pathlib import Path
 from arapkit.arap.domains import all_weight_kinds
 from arapkit.cli.common import (
     Progress,
+    RingProgress,
     add_example_epilog,
     add_graph_options,
     add_view_options,
@@ -154,11 +155,13 @@ def run(args: argparse.Namespace) -> int:
     def progress(label: str) -> Progress:
         return Progress(disable=args.quiet, desc=label)
 
-    runs = run_comparison(mesh, hs.indices, hs.targets, rings=args.rings, rings_map=rings_map,
-                          weights=args.weights, tol=args.tol, max_iter=args.max_iter,
-                          sr_alpha=args.sr_alpha, nodes=args.nodes,
-                          volumetric=args.volumetric,
-                          progress=None if args.quiet else progress)
+    with RingProgress(disable=args.quiet):
+        runs = run_comparison(mesh, hs.indices, hs.targets, rings=args.rings,
+                              rings_map=rings_map, weights=args.weights, tol=args.tol,
+                              max_iter=args.max_iter,
+                              sr_alpha=args.sr_alpha, nodes=args.nodes,
+                              volumetric=args.volumetric,
+                              progress=None if args.quiet else progress)
     for r in runs:
         for msg in r.notes:
             note(f"{r.label}: {msg}", args.quiet)

@@ -20,6 +20,7 @@ import numpy as np
 from arapkit.arap.domains import all_weight_kinds
 from arapkit.cli.common import (
     Progress,
+    RingProgress,
     add_example_epilog,
     add_graph_options,
     add_view_options,
@@ -47,6 +48,8 @@ EXAMPLES = [
     "--rings-file examples/bar-rings.txt -o out.off",
     "arapkit deform examples/cactus.off --handles examples/cactus.json -o out.ply --report - "
     "--quiet | jq .result",
+    "arapkit deform examples/cactus.off --handles examples/cactus.json --groups "
+    "examples/cactus-groups.json -o rigid-arm.ply",
 ]
 
 
@@ -92,6 +95,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         help="per-vertex r: text (one integer per line), .npy, or PLY vertex property 'rings'",
     )
     p.add_argument(
+        "--groups",
+        "-G",
+        metavar="FILE",
+        help="rigid parts and shared-rotation groups (docs/groups.md): JSON entries with "
+        "the handle files' selectors and \"rigid\": true|false, a per-vertex id file (.npy "
+        "or text: libigl's G, -1 for none), or PLY vertex properties 'part'/'group'",
+    )
+    p.add_argument(
         "--weights",
         default=None,
         choices=all_weight_kinds(),
@@ -103,8 +114,8 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--energy",
         default="rring",
         metavar="NAME",
-        help="method: rring (r-ring ARAP, default), spokes-and-rims, sr-arap, embedded "
-        "(see docs/methods.md)",
+        help="method: rring (r-ring ARAP, default), spokes-and-rims, sr-arap, smooth-arap "
+        "(no spike under a single-vertex handle), embedded (see docs/methods.md)",
     )
     p.add_argument(
         "--nodes",
@@ -115,6 +126,11 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "--sr-alpha",
         metavar="A",
         help="SR-ARAP rotation-smoothness weight, times the surface area (default 0.02)",
+    )
+    p.add_argument(
+        "--smooth-lambda",
+        metavar="L",
+        help="Smooth ARAP: weight of the Laplacian term, in [0, 1) (default 0.99; 0 is ARAP)",
     )
     p.add_argument(
         "--tol",
@@ -174,17 +190,25 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
 def _check_method(args: argparse.Namespace) -> dict[str, Any]:
     """Fail fast on a bad method or option; the keyword arguments for the Deformer."""
     from arapkit.methods.deformer import check_method
-    from arapkit.methods.registry import method
+    from arapkit.methods.registry import method, methods
 
-    options = check_method(args.energy, args.sr_alpha, args.nodes)
+    options = check_method(args.energy, args.sr_alpha, args.nodes,
+                           smooth_lambda=args.smooth_lambda)
     can = method(args.energy, "cli")
     if not can.rigidity_map and (args.rings_file or args.rings != 1):
         raise InputError(f"--energy {args.energy}: has no rigidity map (drop --rings/--rings-file)")
+    if args.groups and not can.groups:
+        takes = ", ".join(m.name for m in methods("cli") if m.groups)
+        raise InputError(f"--groups: --energy {args.energy} takes no vertex groups (these "
+                         f"methods do: {takes})")
+    if args.groups and args.volumetric:
+        raise InputError("--groups: vertex groups are for surface ARAP, not --volumetric")
     if not can.accelerate and args.accelerate:
         raise InputError(f"--accelerate: not available with --energy {args.energy} "
                          "(only for the local/global descent methods)")
     args._method_options = options
-    return {"energy": args.energy, "sr_alpha": args.sr_alpha, "nodes": args.nodes}
+    return {"energy": args.energy, "sr_alpha": args.sr_alpha, "nodes": args.nodes,
+            "smooth_lambda": args.smooth_lambda}
 
 
 # -- volumetric ARAP (arapkit.methods.volumetric) -------------------------------------------------
@@ -242,7 +266,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
     from arapkit.io import check_figure_format, check_output_path
     from arapkit.io.clouds import check_shape_output
 
-    inputs = [args.mesh, args.handles, args.transform, args.rings_file]
+    inputs = [args.mesh, args.handles, args.transform, args.rings_file, args.groups]
     outs = []
     if args.output is None and not args.dry_run:
         raise InputError("-o/--output OUT is required (only --dry-run writes no mesh)")
@@ -285,6 +309,7 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
         radius=args.radius,
         volumetric=args.volumetric,
         interior_density=args.interior_density,
+        groups=args.groups,
         **method,
     )
 
@@ -301,13 +326,14 @@ def run(args: argparse.Namespace) -> int:
     tell = lambda msg: note(worded_for(msg, "cli"), args.quiet)  # noqa: E731
     if args.dry_run:
         inputs = load_job_inputs(job, note=tell)
-        return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings)
+        return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings, inputs.groups)
     if args.volumetric and args.weights not in (None, DEFAULT_WEIGHTS):
         from arapkit.methods.volumetric import DEFAULT_VOLUME_WEIGHTS
 
         note(f"--weights {args.weights} applies to surface ARAP; the volume's edges use "
              f"'{DEFAULT_VOLUME_WEIGHTS}' weights (see docs/volumetric.md)", args.quiet)
-    prepared = prepare_job(job, note=tell)
+    with RingProgress(disable=args.quiet):  # a large r's build shows its progress
+        prepared = prepare_job(job, note=tell)
     mesh, hs = prepared.mesh, prepared.handles
     if args.output is not None:  # now that the input is read: a mesh's or a cloud's format
         from arapkit.io.clouds import check_shape_output
@@ -365,7 +391,7 @@ def run(args: argparse.Namespace) -> int:
 
         print(json.dumps(to_jsonable(report), indent=2))
     else:
-        _print_summary(args, mesh, hs, res, wall)
+        _print_summary(args, mesh, hs, res, wall, prepared.groups)
     return 0
 
 
@@ -393,15 +419,16 @@ def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
     from arapkit.workflows.jobs import describe_rings
 
     info = method(args.energy)
-    if info.rigidity_map:
-        return f"r = {describe_rings(r)}"
     opts = _method_options(args)
     shown = [o.describe.format(opts[k]) for k, o in info.options.items()
              if o.describe is not None and k in opts]
+    if info.rigidity_map:
+        # r-ring ARAP is named by its r alone; a method with options of its own says which
+        return ", ".join([*([info.label, *shown] if shown else []), f"r = {describe_rings(r)}"])
     return ", ".join([info.label, *shown])
 
 
-def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
+def _dry_run(args: argparse.Namespace, mesh, hs, rings, groups=None) -> int:
     """Print what the handle file selects and how it moves it; draw it; solve nothing."""
     from arapkit.mesh.orientation import bounding_box
     from arapkit.workflows.jobs import describe_groups, describe_rings
@@ -413,6 +440,12 @@ def _dry_run(args: argparse.Namespace, mesh, hs, rings) -> int:
     print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
     for line in describe_groups(mesh.vertices, hs):
         print(f"  {line}")
+    if groups is not None:
+        print(f"groups: {groups.summary()} from {args.groups}")
+        sizes = groups.sizes
+        for i, name in enumerate(groups.names):
+            kind = "rigid part" if groups.rigid[i] else "shared rotation"
+            print(f"  {name}: {sizes[i]} vertices, {kind}")
     print(f"rings: r = {describe_rings(rings)}; dry run: nothing solved, no mesh written")
     if args.figure:
         from arapkit.plots.figures import groups_figure, save_figure
@@ -429,7 +462,7 @@ def _vec(v: np.ndarray) -> str:
     return "[" + ", ".join(f"{x:.4g}" for x in v) + "]"
 
 
-def _print_summary(args, mesh, hs, res, wall: float) -> None:
+def _print_summary(args, mesh, hs, res, wall: float, groups=None) -> None:
     lines = [
         f"output: {args.output}",
         f"vertices: {mesh.n_vertices}"
@@ -439,6 +472,7 @@ def _print_summary(args, mesh, hs, res, wall: float) -> None:
         f"faces: {mesh.n_faces}" if mesh.faces is not None else
         f"graph: {mesh.graph_description}, {len(mesh.edges)} edges (a point cloud)",
         f"handles: {len(hs.indices)} in {len(hs.groups)} group(s)",
+        *([f"groups: {groups.summary()}"] if groups is not None else []),
         f"method: {args.energy}",
         f"iterations: {res.iterations}",
         f"converged: {'yes' if res.converged else 'no'}",

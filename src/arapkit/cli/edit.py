@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+import threading
 from pathlib import Path
 from typing import Any
 
@@ -26,14 +27,19 @@ Start a local editor in the browser: pick handle regions (click or Shift+drag a 
 drag their gizmos to deform the mesh live, paint the rigidity r with a brush or a paint
 bucket, colour by r or by energy, undo/redo, save sessions and export the result.
 Without MESH the built-in bar is opened with its left end fixed and its right end as a
-handle. The server binds 127.0.0.1 unless --host says otherwise; press Ctrl-C to stop.
+handle. A picture (.png ...) or a planar mesh (one z) opens the 2D view: click to pin, drag
+or turn pins, paint r or pick a preset, export the warped PNG, mesh and pins.
+The server binds 127.0.0.1 unless --host says otherwise; press Ctrl-C to stop.
 """
 
 
 EXAMPLES = [
     "arapkit edit                                  # the built-in bar, ends as handles",
     "arapkit edit examples/cactus.off --handles examples/cactus.json --rings 2",
+    "arapkit edit examples/cactus.off --handles examples/cactus.json --groups "
+    "examples/cactus-groups.json",
     "arapkit edit mesh.off --rings-file rings.txt --export-dir out --port 9000",
+    "arapkit edit examples/puppet.png              # the 2D view: pin and warp a sprite",
     "arapkit edit --session out/mesh-session.json  # resume a saved session",
 ]
 
@@ -54,12 +60,16 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--rings-file", metavar="R", help="per-vertex r (text, .npy or PLY 'rings')")
     p.add_argument(
         "--rings",
+        "-r",
         type=ring_size,
         default=1,
         metavar="N",
         help="uniform r when no rings file is given (default 1)",
     )
-    p.add_argument("--handles", metavar="H", help="handle file (JSON, or .sel with .def)")
+    p.add_argument("--handles", "-H", metavar="H", help="handle file (JSON, or .sel with .def)")
+    p.add_argument("--groups", "-G", metavar="G",
+                   help="rigid parts and shared-rotation groups to start with (as for "
+                   "arapkit deform --groups; paint more with the tool 'Paint part')")
     from arapkit.cli.common import add_weld_option
 
     add_weld_option(p)
@@ -146,6 +156,11 @@ def build_state(args: argparse.Namespace) -> Any:
         hs = load_handles(args.handles, source.vertices,
                           welded=None if welded is None else st.mesh)
         st.add_handle_set(hs, record=False)
+    if getattr(args, "groups", None):
+        from arapkit.io import load_groups
+
+        st.load_groups(load_groups(args.groups, source.vertices,
+                                   welded=None if welded is None else st.mesh))
     st.clear_history()  # start-up choices are not undoable edits
     return st
 
@@ -174,10 +189,47 @@ def _up(text: str | None) -> str | None:
     return ("+" if v[k] > 0 else "-") + "xyz"[k]
 
 
+#: what ``arapkit edit`` opens in the 2D view (a picture is meshed from its alpha)
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".webp", ".bmp", ".gif", ".tif", ".tiff")
+
+
+def _run_2d(args: argparse.Namespace, source: Any) -> int:
+    """The 2D view (:mod:`arapkit.editor.sprite`) on a picture or a planar mesh."""
+    from arapkit.editor.sprite import SpriteEditor
+
+    app = SpriteEditor(source, host=args.host, port=args.port, export_dir=args.export_dir)
+    what = "picture" if isinstance(source, str) else "planar mesh"
+    print(f"arapkit 2D editor: {app.url}  ({what} {app.name}, {app.mesh.n_vertices} "
+          f"vertices; exports go to {app.export_dir}; Ctrl-C to stop)", flush=True)
+    try:
+        threading.Event().wait()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        app.stop()
+    return 0
+
+
 def run(args: argparse.Namespace) -> int:
     """Start the editor and serve until Ctrl-C."""
     # the editor serves with viser and colours energy with matplotlib's maps
     require_extra(("viser", "matplotlib"), "editor", "arapkit edit")
+    if args.mesh and not args.session:
+        from arapkit.validate import host as check_host
+
+        check_host(args.host, "--host")
+        if Path(args.mesh).suffix.lower() in IMAGE_SUFFIXES:
+            require_extra(["PIL", "skimage", "shapely", "pythoncdt"], "image",
+                          "arapkit edit on a picture")
+            return _run_2d(args, args.mesh)
+        from arapkit import load_mesh
+        from arapkit.mesh.planar import is_planar
+
+        mesh = load_mesh(args.mesh)
+        if is_planar(mesh.vertices) and not args.handles and not args.rings_file:
+            require_extra(["PIL", "skimage", "shapely", "pythoncdt"], "image",
+                          "arapkit edit on a planar mesh")
+            return _run_2d(args, mesh)
     from arapkit.editor.app import EditorApp
     from arapkit.validate import host
 

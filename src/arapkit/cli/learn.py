@@ -29,6 +29,7 @@ import time
 import numpy as np
 
 from arapkit.cli.common import (
+    RingProgress,
     add_example_epilog,
     add_view_options,
     add_weld_option,
@@ -230,7 +231,8 @@ def run(args: argparse.Namespace) -> int:
         raise InputError(f"--reference {ref} is out of range: there are {len(frames)} frames "
                          f"(0..{len(frames) - 1})")
     check_connectivity(frames, ref)
-    learned = _learn(args, frames, ref)
+    with RingProgress(disable=args.quiet):  # r_max's rings on a large mesh take a while
+        learned = _learn(args, frames, ref)
     reference, res = learned.reference, learned.result
     _write(args, reference, res)
     counts = ", ".join(f"{r}: {c}" for r, c in res.histogram().items())

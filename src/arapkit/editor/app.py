@@ -36,7 +36,8 @@ import viser
 from arapkit import validate
 from arapkit.editor.files import MESH_SUFFIXES, FileActions, safe_stem
 from arapkit.editor.geometry import UP_AXES, framing_distance, pick_point, raycast
-from arapkit.editor.panels import MAX_R, VIEWS, Panels
+from arapkit.editor.groups import GROUP_COLORS, groups_legend_html
+from arapkit.editor.panels import HANDLE_COLOURS, MAX_R, VIEWS, Panels, next_step
 from arapkit.editor.points import SPLAT_SIZE, CloudNode, cloud_colors, splat_colors
 from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, PointerTools
@@ -61,11 +62,21 @@ from arapkit.mesh.selection import connected_region
 __all__ = ["MAX_R", "MESH_SUFFIXES", "TOOLS", "UP_AXES", "VIEWS", "EditorApp", "safe_stem"]
 
 #: how much of the view the model fills when a mesh is opened
-FRAME_FILL = 0.7
+FRAME_FILL = 0.65
 #: a gizmo's size in radii of its handle (see EditorApp.gizmo_scale)
 GIZMO_PER_RADIUS = 6.0
-HANDLE_RGB, FROZEN_RGB, ACTIVE_RGB, SELECT_RGB = (255, 140, 0), (110, 110, 135), (255, 235, 0), (
-    230, 30, 200)
+#: a gizmo's size within these fractions of the mesh's bounding-box diagonal: framed at
+#: FRAME_FILL left of the panel, a tall model (the cactus, seen from a little above) has
+#: about 0.13 of its diagonal to spare above its top, so an arrow from a handle there stays
+#: in view (at 0.3 it left the view, or reached under the panel)
+GIZMO_MIN, GIZMO_MAX = 0.05, 0.12
+#: the share of the page's width that the panel covers (320 px of a 1200 px window): the
+#: camera aims so that the model is centred in the rest
+PANEL_SHARE = 0.28
+#: a dot's diameter in local edge lengths (the median length of the edges at the dotted
+#: vertices): neighbouring dots then never overlap, on a coarse mesh as on a fine one
+DOT_PER_EDGE = 0.45
+SELECT_RGB = (230, 30, 200)
 
 
 def load_pointer_kernels() -> None:
@@ -85,6 +96,18 @@ def load_pointer_kernels() -> None:
     face_groups(F, np.zeros(3, dtype=np.int64), 1)
     connected_region(F, np.ones(3, dtype=bool), 0)
     connected_region(F[:, :2], np.ones(3, dtype=bool), 0)  # a point cloud's edges
+
+
+def _vertex_spacing(mesh: Any) -> np.ndarray:
+    """Each vertex's mean incident edge length (the mean edge length where it has none)."""
+    E = np.asarray(mesh.edges)
+    V = np.asarray(mesh.vertices, dtype=np.float64)
+    n = len(V)
+    length = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+    total = np.bincount(E.ravel(), np.repeat(length, 2), n)
+    count = np.bincount(E.ravel(), minlength=n)
+    fallback = float(length.mean()) if len(length) else 1.0
+    return np.where(count > 0, total / np.maximum(count, 1), fallback)
 
 
 def _raise_keyboard_interrupt(signum: int, frame: Any) -> None:
@@ -162,6 +185,9 @@ class EditorApp(Panels, PointerTools, FileActions):
         self._proxy_of: Any = None
         #: called as hook(update, perf_counter_when_sent) after each shape is handed to viser
         self.sent_hooks: list[Callable[[SolveUpdate, float], None]] = []
+        #: a note about the last edit, kept in the status line until the next edit
+        self.edit_note = ""
+        self.vertex_spacing = np.ones(0)
         #: names of uploads dropped while arriving because they were over the cap
         self.rejected_uploads: list[str] = []
         self.build_panels()
@@ -236,6 +262,7 @@ class EditorApp(Panels, PointerTools, FileActions):
             lo, hi = V.min(axis=0), V.max(axis=0)
             self.diag = st.mesh.bounding_box_diagonal or 1.0
             self.edge_length = st.mesh.mean_edge_length
+            self.vertex_spacing = _vertex_spacing(st.mesh)
             self.worker.reset_shape(V, st.mesh)
             self.vertex_energy = None
             self.last_update = None
@@ -293,9 +320,11 @@ class EditorApp(Panels, PointerTools, FileActions):
         dist = framing_distance(self.state.vertices, centre, toward_eye, up,
                                 self.server.initial_camera.fov, 1.05, FRAME_FILL)
         eye = centre + dist * toward_eye
-        # Aim a little right of the centre so the GUI panel (right side) hides less.
+        # Aim right of the centre by the panel's share of the view, so that the model is
+        # centred in the part of the page the panel leaves (its gizmos then fit there too)
         right = np.cross(centre - eye, up)
-        shift = 0.05 * dist * right / np.linalg.norm(right)
+        half_width = dist * np.tan(self.server.initial_camera.fov / 2) * 1.5  # radians
+        shift = PANEL_SHARE * half_width * right / np.linalg.norm(right)
         centre, eye = centre + shift, eye + shift
         self.server.scene.set_up_direction(up_name)
         self.server.initial_camera.position = tuple(eye)
@@ -338,6 +367,9 @@ class EditorApp(Panels, PointerTools, FileActions):
         labels, colors, legend = None, (), ""
         if view == "Rigidity r":
             labels, colors, legend = ring_labels(st.rings), RING_COLORS, rings_legend_html()
+        elif view == "Groups":
+            labels, colors = st.groups.colour_labels(), (SHADED_COLOR, *GROUP_COLORS)
+            legend = groups_legend_html(st.groups)
         elif view == "Energy":
             if self.vertex_energy is None:
                 legend = "<i>energy appears after an r-ring ARAP solve</i>"
@@ -449,18 +481,27 @@ class EditorApp(Panels, PointerTools, FileActions):
         for node in self._markers.values():
             node.remove()
         self._markers = {}
-        size = 0.6 * self.edge_length
         idx = st.handle_indices()
         if len(idx) and self.cb_show_handles.value:
             cols = np.concatenate([
-                np.tile(ACTIVE_RGB if h.name == self.active else
-                        FROZEN_RGB if h.frozen else HANDLE_RGB, (len(h.vertices), 1))
+                np.tile(HANDLE_COLOURS[(bool(h.frozen), h.name == self.active)][0],
+                        (len(h.vertices), 1))
                 for h in st.handles
             ])
-            self.show_points("handles", idx, cols, size)
+            self.show_points("handles", idx, cols, self.dot_size(idx))
         if len(st.selection):
-            self.show_points("selection", st.selection, SELECT_RGB, size * 1.2)
+            self.show_points("selection", st.selection, SELECT_RGB,
+                             self.dot_size(st.selection))
         self.md_selection.content = f"Selected: **{len(st.selection)}** vertices"
+        # the hint follows the selection at once ("press Make handle ...")
+        self.md_hint.content = next_step(st)
+
+    def dot_size(self, idx: np.ndarray) -> float:
+        """Diameter of the dots drawn on the vertices ``idx``: a share of their local edge
+        length, so that neighbouring dots do not overlap (a coarse mesh's mean edge is
+        several times the edge of its finely cut parts)."""
+        spacing = self.vertex_spacing[idx]
+        return float(DOT_PER_EDGE * np.median(spacing)) if len(spacing) else 0.0
 
     def _sync_gizmos(self) -> None:
         for g in self._gizmos:
@@ -478,7 +519,8 @@ class EditorApp(Panels, PointerTools, FileActions):
         instead of hiding them, and a large handle gets a gizmo that reaches past it.
         """
         radius = float(np.linalg.norm(handle.anchor - handle.pivot, axis=1).max())
-        return float(np.clip(GIZMO_PER_RADIUS * radius, 0.08 * self.diag, 0.3 * self.diag))
+        return float(np.clip(GIZMO_PER_RADIUS * radius, GIZMO_MIN * self.diag,
+                             GIZMO_MAX * self.diag))
 
     def _make_gizmo(self, name: str, wxyz: np.ndarray, position: np.ndarray,
                     scale: float) -> Any:
@@ -510,8 +552,10 @@ class EditorApp(Panels, PointerTools, FileActions):
             if len(idx) == 0:
                 self.status("No handles yet: see **Next** below.")
                 return None
+            if self._status_ok.startswith("No handles yet"):  # not once a handle is made
+                self.status(f"**{st.settings.label}** · solving ...")
             req = SolveRequest(st.mesh, idx, tgt, st.rings, dataclasses.replace(st.settings),
-                               live=live)
+                               live=live, groups=st.groups.vertex_groups())
             return self.worker.submit(req)
 
     def drag_handle(
@@ -567,6 +611,18 @@ class EditorApp(Panels, PointerTools, FileActions):
 
     def _status_from(self, u: SolveUpdate) -> None:
         method = self.state.settings.label
+        if u.building is not None:
+            fraction, seconds, cost = u.building
+            r = self.state.rings
+            shown = f"r = {int(r.max())}" if r.min() == r.max() else f"r up to {int(r.max())}"
+            left = max(0.0, seconds * (1.0 - fraction))
+            self.top.progress(fraction, f"Building the r-rings for {shown} ({cost}): "
+                              f"**{100 * fraction:.0f} %**, about {left:.0f} s left. "
+                              "*Cancel* is under *Global r*.")
+            self.bt_cancel_build.visible = fraction < 1.0
+            return
+        self.top.progress(None)
+        self.bt_cancel_build.visible = False
         if u.error:
             self.status(f"**{method}**: {u.error}")
             return
@@ -579,10 +635,16 @@ class EditorApp(Panels, PointerTools, FileActions):
         shown = f"first shape **{first:.0f} ms** after the move{setup}"
         total = f" · final after {u.latency_ms:.0f} ms" if u.final else ""
         notes = "".join(f"  \n_{n}_" for n in u.notes)
+        edit = f"  \n{self.edit_note}" if self.edit_note else ""
         self.status(
             f"**{method}** · iterations **{u.iterations}** · energy **{energy}** · {phase}  \n"
-            f"{shown}{total}{notes}"
+            f"{shown}{total}{notes}{edit}"
         )
+
+    def solved_rings(self) -> np.ndarray | None:
+        """r per vertex of the deformer being solved (before a build in progress), if any."""
+        d = self.worker.deformer
+        return None if d is None else np.asarray(d.rings)
 
     def status(self, text: str) -> None:
         """Set the status line at the top of the panel (what an error line gives way to)."""

@@ -104,6 +104,7 @@ class FileActions:
     vertex_energy: np.ndarray | None
     up_mesh: Any
     up_rings: Any
+    up_groups: Any
     up_session: Any
     bt_save: Any
     bt_export: Any
@@ -117,6 +118,7 @@ class FileActions:
         """Bind the upload and export widgets, and guard uploads while they arrive."""
         ui = self.ui
         self.up_rings.on_upload(ui(self._upload_rings))
+        self.up_groups.on_upload(ui(self._upload_groups))
         self.bt_save.on_click(ui(self._save_session))
         self.up_session.on_upload(ui(self._upload_session))
         self.bt_export.on_click(ui(self._export))
@@ -197,9 +199,9 @@ class FileActions:
             except Exception as exc:  # a parser choking on garbage: still the file's fault
                 raise InputError(f"{name}: cannot read ({type(exc).__name__}: {exc})") from None
 
-    def open_mesh_bytes(self, name: str, data: bytes) -> None:
-        """Replace the mesh by an uploaded file, a mesh or a point cloud (``name`` only
-        picks the format)."""
+    def read_mesh_bytes(self, name: str, data: bytes) -> Any:
+        """The mesh or point cloud of an uploaded file (``name`` only picks the format), or
+        a one-line refusal; nothing in the editor changes."""
         from arapkit.io import load_shape
 
         self._check_upload(name, data, "meshes")
@@ -208,9 +210,23 @@ class FileActions:
                              f"{shape_formats_text()})")
         mesh = self._via_tempfile(name, data, load_shape)  # a file without faces: a cloud
         mesh.name = safe_stem(name)
+        return mesh
+
+    def replace_mesh(self, mesh: Any) -> None:
+        """Start a new session on ``mesh`` (the old one's handles, r and undo are gone)."""
         with self.lock:
             self.state = EditorState(mesh)
             self.install_mesh()
+
+    def open_mesh_bytes(self, name: str, data: bytes) -> None:
+        """Replace the mesh by an uploaded file at once (the page asks first, see
+        :meth:`has_work`)."""
+        self.replace_mesh(self.read_mesh_bytes(name, data))
+
+    def has_work(self) -> bool:
+        """Whether opening another mesh would lose something: handles, or edits to undo."""
+        st = self.state
+        return bool(st.handles) or st.can_undo or bool((st.rings != 1).any())
 
     def load_rings_bytes(self, name: str, data: bytes) -> np.ndarray:
         """Use an uploaded rigidity map (text, .npy or PLY with ``rings``); undoable."""
@@ -223,6 +239,23 @@ class FileActions:
             self.state.load_rings(rings)
             self.after_edit()
             return rings
+
+    def load_groups_bytes(self, name: str, data: bytes) -> Any:
+        """Use an uploaded groups file (JSON, an id file or a PLY with ``part``/``group``)
+        as the painted groups; undoable. Returns the groups read."""
+        from arapkit.io import load_groups
+
+        self._check_upload(name, data, "groups files")
+        with self.lock:
+            mesh = self.state.mesh
+            welded = getattr(mesh, "welded_from", None)
+            source = mesh if welded is None else welded.source
+            groups = self._via_tempfile(
+                name, data, lambda p: load_groups(p, source.vertices,
+                                                  welded=None if welded is None else mesh))
+            self.state.load_groups(groups)
+            self.after_edit()
+            return groups
 
     def load_session_bytes(self, name: str, data: bytes) -> None:
         """Apply an uploaded session to the loaded mesh (never opens a path it names)."""
@@ -241,13 +274,52 @@ class FileActions:
 
     def _upload_mesh(self, event: Any) -> None:
         f = self.up_mesh.value
-        self.open_mesh_bytes(f.name, f.content)
-        self.notify(event, "Mesh loaded", self.mesh_info().replace("**", ""))
+        mesh = self.read_mesh_bytes(f.name, f.content)  # a bad file changes nothing
+        client = getattr(event, "client", None)
+        if client is None or not self.has_work():
+            self.replace_mesh(mesh)
+            self.notify(event, "Mesh loaded", self.mesh_info().replace("**", ""))
+            return
+        self._confirm_open(event, client, f.name, mesh)
+
+    def _confirm_open(self, event: Any, client: Any, name: str, mesh: Any) -> None:
+        """Ask before a new mesh replaces this one's handles, r and deformation (no undo
+        crosses meshes, as in Blender or Photoshop opening a file)."""
+        st = self.state
+        what = [f"{len(st.handles)} handle(s)" if st.handles else "",
+                "its r" if (st.rings != 1).any() else "",
+                "its deformation and undo history" if st.can_undo else ""]
+        lost = ", ".join(w for w in what if w)
+        shown, current = printable(name), printable(st.mesh.name)
+        modal = client.gui.add_modal(f"Open {shown}?")
+        with modal:
+            client.gui.add_markdown(
+                f"This replaces **{current}** with {lost}. Undo cannot bring them back: "
+                "*Save session* first to keep them.")
+            b_open = client.gui.add_button(f"Open {shown}", color="red")
+            b_keep = client.gui.add_button(f"Keep {current}")
+
+        def open_it(_: Any) -> None:
+            modal.close()
+            self.replace_mesh(mesh)
+            self.notify(event, "Mesh loaded", self.mesh_info().replace("**", ""))
+
+        def keep(_: Any) -> None:
+            modal.close()
+            self.notify(event, "Not opened", f"{shown}: kept {current} as it was")
+
+        b_open.on_click(self.ui(open_it))
+        b_keep.on_click(self.ui(keep))
 
     def _upload_rings(self, event: Any) -> None:
         f = self.up_rings.value
         rings = self.load_rings_bytes(f.name, f.content)
         self.notify(event, "Rings loaded", f"{f.name}: r from {rings.min()} to {rings.max()}")
+
+    def _upload_groups(self, event: Any) -> None:
+        f = self.up_groups.value
+        groups = self.load_groups_bytes(f.name, f.content)
+        self.notify(event, "Groups loaded", f"{f.name}: {groups.summary()}")
 
     def _upload_session(self, event: Any) -> None:
         f = self.up_session.value
@@ -281,7 +353,8 @@ class FileActions:
             return st.save_session(out / f"{stem}-session.json")
 
     def export(self) -> list[Path]:
-        """Write the deformed mesh (PLY with r and energy per vertex) and the rings file.
+        """Write the deformed mesh (PLY with r and energy per vertex), the rings file and,
+        when groups are painted, the groups file (``--groups`` reads it back).
 
         Everything the mesh's file carried comes along (``save_mesh(like=...)``); a mesh
         loaded from OBJ is also exported as OBJ, which keeps its UVs and materials.
@@ -303,6 +376,16 @@ class FileActions:
             rings = st.rings if welded is None else st.rings[welded.index]
             save_rings(rings_path, rings)
             paths = [mesh_path, rings_path]
+            groups = st.groups.vertex_groups()
+            if groups is not None:  # the painted parts, as a groups file of the input
+                from arapkit.io import save_groups
+                from arapkit.mesh.groups import VertexGroups
+
+                if welded is not None:
+                    groups = VertexGroups(groups.ids[welded.index], groups.names,
+                                          groups.rigid, groups.source)
+                paths.append(out / f"{stem}-groups.json")
+                save_groups(paths[-1], groups)
             attrs = getattr(source, "attributes", None)
             if attrs is not None and attrs.source_format == "obj":
                 obj_path = out / f"{stem}-deformed.obj"

@@ -59,6 +59,26 @@ class Handle:
         """Centre of rotation: the anchor centroid."""
         return self.anchor.mean(axis=0)
 
+    @property
+    def at_rest(self) -> bool:
+        """The gizmo is where the handle was made: no rotation, at the anchor centroid.
+
+        Examples
+        --------
+        >>> h = Handle.create("tip", np.array([0]), np.zeros((1, 3)))
+        >>> h.at_rest
+        True
+        """
+        return bool(np.allclose(self.wxyz, [1.0, 0.0, 0.0, 0.0], rtol=0, atol=1e-12)
+                    and np.array_equal(self.position, self.pivot))
+
+    def same_as(self, other: Handle) -> bool:
+        """Whether ``other`` is this handle unchanged (name, vertices, pose, anchor, frozen)."""
+        return (self.name == other.name and self.frozen == other.frozen
+                and all(a is b or np.array_equal(a, b) for a, b in (
+                    (self.vertices, other.vertices), (self.anchor, other.anchor),
+                    (self.wxyz, other.wxyz), (self.position, other.position))))
+
     def targets(self) -> np.ndarray:
         """Target positions of the handle vertices for the current gizmo pose."""
         last = self._last

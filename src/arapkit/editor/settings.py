@@ -27,7 +27,24 @@ from arapkit.errors import InputError
 from arapkit.mesh.weights import DEFAULT_WEIGHTS
 from arapkit.methods.registry import MethodInfo, method, method_names, methods
 
-__all__ = ["METHODS", "SolverChoice", "SolverSettings", "solver_choices"]
+__all__ = ["METHODS", "MULTIRES_CHOICES", "SolverChoice", "SolverSettings", "multires_label",
+           "solver_choices"]
+
+#: the Solver panel's *Coarse to fine* choices and the ``multires`` value each stands for
+#: (``Deformer(..., multires=...)``: None decides by the mesh's size and the method)
+MULTIRES_CHOICES = {"Auto": None, "On": True, "Off": False}
+
+
+def multires_label(multires: bool | None) -> str:
+    """The panel's label of a ``multires`` value.
+
+    Examples
+    --------
+    >>> multires_label(None), multires_label(False)
+    ('Auto', 'Off')
+    """
+    return next(k for k, v in MULTIRES_CHOICES.items() if v is multires)
+
 
 #: the methods the editor offers, by their one name (the registry's order)
 METHODS = method_names("editor")

@@ -50,6 +50,7 @@ from arapkit.editor.geometry import (  # raycast, quat_to_matrix: kept at their 
     vertex_normals,
     vertices_within,
 )
+from arapkit.editor.groups import PaintedGroups
 from arapkit.editor.handles import Handle
 from arapkit.editor.session import SESSION_FORMAT, SESSION_VERSION
 from arapkit.editor.settings import METHODS, SolverSettings
@@ -67,6 +68,7 @@ MAX_UNDO = 200
 class _Snapshot:
     handles: tuple[Handle, ...]
     rings: np.ndarray
+    groups: PaintedGroups | None = None
 
 
 # --------------------------------------------------------------------------- editor state
@@ -94,6 +96,8 @@ class EditorState:
         self.mesh_path = None if mesh_path is None else str(mesh_path)
         self.vertices = np.array(mesh.vertices, dtype=np.float64)
         self.rings = self.check_rings(rings)
+        #: painted rigid parts and shared-rotation groups (never changed in place)
+        self.groups = PaintedGroups.empty(self.n)
         self.handles: list[Handle] = []
         self.selection = np.zeros(0, dtype=np.int64)
         # the shape's own weighting: a point cloud's kinds are not a mesh's
@@ -119,11 +123,12 @@ class EditorState:
 
     # ---------------------------------------------------------------- undo / redo
     def _snapshot(self) -> _Snapshot:
-        return _Snapshot(tuple(h.copy() for h in self.handles), self.rings)
+        return _Snapshot(tuple(h.copy() for h in self.handles), self.rings, self.groups)
 
     def _restore(self, snap: _Snapshot) -> None:
         self.handles = [h.copy() for h in snap.handles]
         self.rings = snap.rings
+        self.groups = snap.groups
 
     def checkpoint(self) -> None:
         """Record the current handles and rings as one undo step (drops the redo list)."""
@@ -131,29 +136,43 @@ class EditorState:
         del self._undo[:-MAX_UNDO]
         self._redo.clear()
 
-    def undo(self) -> bool:
-        """Go back one step; ``False`` when there is nothing to undo."""
-        if not self._undo:
+    def _is_current(self, snap: _Snapshot) -> bool:
+        """``snap`` is what the state already is: going back to it would change nothing."""
+        return ((snap.rings is self.rings or np.array_equal(snap.rings, self.rings))
+                and (snap.groups is self.groups
+                     or (snap.groups.specs == self.groups.specs
+                         and np.array_equal(snap.groups.ids, self.groups.ids)))
+                and len(snap.handles) == len(self.handles)
+                and all(a.same_as(b) for a, b in zip(snap.handles, self.handles,
+                                                      strict=True)))
+
+    def _step(self, source: list[_Snapshot], target: list[_Snapshot]) -> bool:
+        # steps that changed nothing (a gizmo grabbed and let go in place, a value set to
+        # what it was) are dropped: every Undo click changes what the user sees
+        while source and self._is_current(source[-1]):
+            source.pop()
+        if not source:
             return False
-        self._redo.append(self._snapshot())
-        self._restore(self._undo.pop())
+        target.append(self._snapshot())
+        self._restore(source.pop())
         return True
+
+    def undo(self) -> bool:
+        """Go back one step that changes something; ``False`` when there is none."""
+        return self._step(self._undo, self._redo)
 
     def redo(self) -> bool:
         """Re-apply the last undone step; ``False`` when there is nothing to redo."""
-        if not self._redo:
-            return False
-        self._undo.append(self._snapshot())
-        self._restore(self._redo.pop())
-        return True
+        return self._step(self._redo, self._undo)
 
     @property
     def can_undo(self) -> bool:
-        return bool(self._undo)
+        # from the top: the last step is nearly always a real one, so one comparison
+        return any(not self._is_current(s) for s in reversed(self._undo))
 
     @property
     def can_redo(self) -> bool:
-        return bool(self._redo)
+        return any(not self._is_current(s) for s in reversed(self._redo))
 
     # ---------------------------------------------------------------- selection
     def _combine(self, idx: np.ndarray, mode: str) -> np.ndarray:
@@ -266,6 +285,8 @@ class EditorState:
         new_name = new_name.strip()
         if not new_name:
             raise InputError("rename handle: the new name is empty")
+        if new_name == name:
+            return
         if new_name != name and any(h.name == new_name for h in self.handles):
             raise InputError(f"rename handle: the name {new_name!r} is taken")
         h = self.handle(name)
@@ -338,11 +359,17 @@ class EditorState:
         return self.handle_indices(), np.concatenate([h.targets() for h in self.handles])
 
     # ---------------------------------------------------------------- rigidity
-    def set_global_rings(self, r: int) -> None:
-        """Give every vertex the same ``r``."""
+    def set_global_rings(self, r: int, record: bool = True) -> None:
+        """Give every vertex the same ``r`` (``record=False``: as part of the last undo
+        step, e.g. a slider gesture applied in two pieces)."""
         new = self.check_rings(validate.ring_size(r, "global r"))
-        self.checkpoint()
+        if record:
+            self.checkpoint()
         self.rings = new
+
+    def restore_rings(self, rings: np.ndarray) -> None:
+        """Go back to the map ``rings`` (a cancelled build's), as an undoable step."""
+        self.load_rings(rings)
 
     def load_rings(self, rings: np.ndarray) -> None:
         """Replace the rigidity map (e.g. a learned rings file)."""
@@ -390,6 +417,53 @@ class EditorState:
         self.rings = new
         return changed
 
+    # ---------------------------------------------------------------- groups
+    def new_group(self, rigid: bool, name: str | None = None) -> int:
+        """Add an empty group (a rigid part, or a shared-rotation group); its index."""
+        groups, g = self.groups.with_group(rigid, name)
+        self.checkpoint()
+        self.groups = groups
+        return g
+
+    def paint_group(self, point: np.ndarray, radius: float, g: int,
+                    record: bool = True) -> int:
+        """Part brush: put the vertices within ``radius`` of ``point`` in group ``g`` (-1:
+        in none). Returns the number of vertices that changed group; ``record=False`` for
+        the dabs after a stroke's first.
+
+        Examples
+        --------
+        >>> from arapkit.mesh.shapes import bar
+        >>> st = EditorState(bar())
+        >>> g = st.new_group(rigid=True)
+        >>> st.paint_group(st.vertices[0], 0.2, g) > 0, st.groups.vertex_groups().names
+        (True, ('part 1',))
+        """
+        idx = self.vertices_near(point, radius)
+        if idx.size == 0:
+            idx = np.array([self.nearest_vertex(point)])
+        changed = int(np.count_nonzero(self.groups.ids[idx] != g))
+        if changed:
+            new = self.groups.painted(idx, g)  # checked before the undo step
+            if record:
+                self.checkpoint()
+            self.groups = new
+        return changed
+
+    def remove_group(self, g: int) -> None:
+        """Delete group ``g``; its vertices are in no group."""
+        new = self.groups.without(g)
+        self.checkpoint()
+        self.groups = new
+
+    def load_groups(self, groups: Any) -> None:
+        """Replace the painted groups by a :class:`~arapkit.mesh.groups.VertexGroups`."""
+        if groups.n_vertices != self.n:
+            raise InputError(f"{groups.source}: groups of {groups.n_vertices} vertices for a "
+                             f"mesh of {self.n}")
+        self.checkpoint()
+        self.groups = PaintedGroups.of(groups)
+
     # ---------------------------------------------------------------- sessions
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready session: mesh path, handles (with targets), rings, solver settings."""
@@ -404,6 +478,7 @@ class EditorState:
             "handle_indices": idx.tolist(),
             "targets": tgt.tolist(),
             "rings": self.rings.tolist(),
+            "groups": self.groups.to_json(),
             "solver": self.settings.to_dict(),
             # a session on a welded mesh indexes the welded vertices: reopening welds again
             "weld": (None if getattr(self.mesh, "welded_from", None) is None
@@ -428,10 +503,13 @@ class EditorState:
         if np.unique(all_idx).size != all_idx.size:
             raise InputError("session: a vertex belongs to two handles")
         rings = self.check_rings(d["rings"], "session rings") if "rings" in d else self.rings
+        groups = (PaintedGroups.from_json(d["groups"], self.n) if "groups" in d
+                  else PaintedGroups.empty(self.n))
         settings = SolverSettings.from_dict(d.get("solver", {}))
         if record:
             self.checkpoint()
         self.handles, self.rings, self.settings = handles, rings, settings
+        self.groups = groups
 
     def save_session(self, path: str | os.PathLike[str]) -> Path:
         """Write the session as JSON (atomically: a crash never leaves half a file)."""

@@ -34,10 +34,11 @@ from typing import Any
 import numpy as np
 
 from arapkit.editor.geometry import CameraView, nearest_corner, pick_point, raycast
+from arapkit.editor.groups import GROUP_COLORS
 from arapkit.editor.points import SPLAT_SIZE
 from arapkit.editor.state import EditorState
-from arapkit.editor.views import RING_COLORS, ring_labels
-from arapkit.errors import InputError
+from arapkit.editor.views import RING_COLORS, SHADED_COLOR, ring_labels
+from arapkit.errors import InputError, worded_for
 
 __all__ = ["TOOLS", "Pick", "PointerTools", "Tool", "find_tool"]
 
@@ -47,7 +48,8 @@ class Pick:
     """Where a click hit the surface, and the panel's values that a tool reads.
 
     ``face`` is the face hit (``None``: the point alone), ``add`` is Shift held, ``radius``
-    the brush radius in model units and ``r`` the panel's "Paint r".
+    the brush radius in model units, ``r`` the panel's "Paint r" and ``group`` the group
+    the *Paint part* tool paints (-1: the eraser).
     """
 
     point: np.ndarray
@@ -55,6 +57,7 @@ class Pick:
     add: bool
     radius: float
     r: int
+    group: int = -1
 
 
 def _select(st: EditorState, pick: Pick) -> int:
@@ -65,6 +68,26 @@ def _select(st: EditorState, pick: Pick) -> int:
 
 def _paint(st: EditorState, pick: Pick) -> int:
     return st.paint(pick.point, pick.radius, pick.r)
+
+
+def _paint_part(st: EditorState, pick: Pick) -> int:
+    return st.paint_group(pick.point, pick.radius, pick.group)
+
+
+def _dab_r(st: EditorState, pick: Pick, record: bool) -> int:
+    return st.paint(pick.point, pick.radius, pick.r, record=record)
+
+
+def _dab_part(st: EditorState, pick: Pick, record: bool) -> int:
+    return st.paint_group(pick.point, pick.radius, pick.group, record=record)
+
+
+def _r_rgb(pick: Pick) -> tuple[int, int, int]:
+    return RING_COLORS[ring_labels(np.array([pick.r]))[0]]
+
+
+def _part_rgb(pick: Pick) -> tuple[int, int, int]:
+    return SHADED_COLOR if pick.group < 0 else GROUP_COLORS[pick.group % len(GROUP_COLORS)]
 
 
 def _fill(st: EditorState, pick: Pick) -> int:
@@ -89,13 +112,20 @@ class Tool:
     click : callable(EditorState, Pick) -> int, or None
         What a click does; returns the vertices affected.  ``None``: clicks do nothing.
     paints : bool
-        A click changes r (one undo step; the page redraws and solves), not the selection.
+        A click changes what is painted, r or the groups (one undo step; the page redraws
+        and solves), not the selection.
     rectangle : bool
         Shift+drag draws a selection rectangle.
     brush : bool
         Shift+drag on the mesh paints a stroke (one undo step).
     aliases : tuple of str
         Former labels that :func:`find_tool` still accepts.
+    dab : callable(EditorState, Pick, record) -> int, or None
+        One dab of a brush stroke (``record``: the stroke's first, the undo step).
+    stroke_rgb : callable(Pick) -> (r, g, b), or None
+        The colour a stroke in progress is shown in.
+    view : str or None
+        The colour view the tool switches a shaded display to (what it paints).
     """
 
     name: str
@@ -106,6 +136,9 @@ class Tool:
     rectangle: bool = False
     brush: bool = False
     aliases: tuple[str, ...] = ()
+    dab: Callable[[EditorState, Pick, bool], int] | None = None
+    stroke_rgb: Callable[[Pick], tuple[int, int, int]] | None = None
+    view: str | None = None
 
 
 #: every pointer tool, in the order of the tool selector
@@ -117,10 +150,17 @@ TOOLS: tuple[Tool, ...] = (
          click=_select, rectangle=True, aliases=("Select: click", "Select: rectangle")),
     Tool("brush", "Paint brush",
          "Click or Shift+drag paints **Paint r** on the vertices within the radius.",
-         click=_paint, paints=True, brush=True),
+         click=_paint, paints=True, brush=True, dab=_dab_r, stroke_rgb=_r_rgb,
+         view="Rigidity r"),
     Tool("fill", "Flood fill",
          "Click fills the connected region of equal r with **Paint r**.",
-         click=_fill, paints=True),
+         click=_fill, paints=True, view="Rigidity r"),
+    Tool("part", "Paint part",
+         "Click or Shift+drag puts the vertices within the radius in the **Group** chosen "
+         "in *Groups*; the group *(erase)* takes them out. A rigid part moves as one "
+         "piece, a shared-rotation group turns as one.",
+         click=_paint_part, paints=True, brush=True, dab=_dab_part, stroke_rgb=_part_rgb,
+         view="Groups"),
 )
 
 
@@ -156,6 +196,11 @@ class PointerTools:
     md_tool_help: Any
     sl_radius: Any
     sl_paint: Any
+    dd_view: Any
+    quietly: Callable[[Callable[[], Any]], None]
+    rebuild_display: Callable[[], None]
+    show_settings: Callable[[], None]
+    current_group: Callable[[], int]
     after_edit: Callable[..., int | None]
     draw_markers: Callable[[], None]
     mesh_nodes: Callable[[], list[Any]]
@@ -187,8 +232,7 @@ class PointerTools:
         if t.click is None:
             return 0
         with self.lock:
-            pick = Pick(np.asarray(point, np.float64), face, add, self._radius(),
-                        int(self.sl_paint.value))
+            pick = self._pick(point, face, add)
             n = t.click(self.state, pick)
             if t.paints:
                 self.after_edit()
@@ -208,9 +252,22 @@ class PointerTools:
     def _radius(self) -> float:
         return float(self.sl_radius.value) / 100.0 * self.diag
 
+    def _pick(self, point: Any, face: int | None, add: bool) -> Pick:
+        """A pick at ``point`` with the panel's radius, r and group."""
+        return Pick(np.asarray(point, np.float64), face, add, self._radius(),
+                    int(self.sl_paint.value), self.current_group())
+
     def _on_tool_changed(self) -> None:
         t = self.tool
         self.md_tool_help.content = t.help
+        if t.view is not None and self.dd_view.value == "Shaded":
+            # paint is invisible on the shaded model: show the colours of what the tool
+            # paints (as Blender's weight paint mode shows the weights)
+            self.quietly(lambda: setattr(self.dd_view, "value", t.view))
+            self.rebuild_display()
+            self.show_settings()
+            self.md_tool_help.content = (t.help + f" The view switched to *{t.view}* to "
+                                         "show what you paint.")
         scene = self.server.scene
         scene.remove_rect_select_callback("all")
         if t.rectangle:
@@ -243,7 +300,8 @@ class PointerTools:
                 self.apply_tool(t.name, hit[1], face=hit[0], add=add)
                 self.clear_error()
         except InputError as exc:
-            self.notify(event, "Cannot do that", str(exc), error=True)
+            self.notify(event, "Cannot do that",
+                        worded_for(exc.args[0], "editor") if exc.args else str(exc), error=True)
 
     def _on_rect(self, event: Any) -> None:
         if not self.tool.rectangle:
@@ -261,11 +319,12 @@ class PointerTools:
             if not self.tool.brush:
                 return
             st = self.state
+            t = self.tool
             eye = np.asarray(event.client.camera.position, np.float64)
             hit = self._hit(eye, np.asarray(event.end_position) - eye)
-            r = int(self.sl_paint.value)
+            pick = self._pick(eye if hit is None else hit[1], None, False)
             if hit is not None:
-                st.paint(hit[1], self._radius(), r, record=not self._stroke_open)
+                t.dab(st, pick, not self._stroke_open)
                 self._stroke_open = True
                 self._stroke.update(st.vertices_near(hit[1], self._radius()).tolist())
             if event.phase == "end":
@@ -273,15 +332,14 @@ class PointerTools:
                 self._stroke.clear()
                 self.after_edit()
             elif time.perf_counter() - self._last_stroke_draw > 0.1 and self._stroke:
-                self._draw_stroke(r)
+                self._draw_stroke(t.stroke_rgb(pick))
 
-    def _draw_stroke(self, r: int) -> None:
-        """Show the stroke so far as dots in the colour of r.
+    def _draw_stroke(self, rgb: tuple[int, int, int]) -> None:
+        """Show the stroke so far as dots in the colour it paints.
 
         Rebuilding the coloured meshes mid-stroke would remove the node being dragged,
         which ends the drag; they are rebuilt once, when the stroke ends.
         """
         idx = np.fromiter(self._stroke, dtype=np.int64)
-        self.show_points("stroke", idx, RING_COLORS[ring_labels(np.array([r]))[0]],
-                         0.8 * self.edge_length)
+        self.show_points("stroke", idx, rgb, 0.8 * self.edge_length)
         self._last_stroke_draw = time.perf_counter()

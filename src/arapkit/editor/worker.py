@@ -59,6 +59,7 @@ from typing import Any
 import numpy as np
 
 from arapkit.arap.domains import domain_of
+from arapkit.arap.rings import BuildCancelled, ring_progress
 from arapkit.editor.motion import SecondaryMotion
 from arapkit.editor.settings import SolverSettings
 from arapkit.errors import worded_for
@@ -75,6 +76,10 @@ PREVIEW_FRAME_MS = 20.0
 #: seconds between the progress reports (iterations and energy, no shape) of a large mesh's
 #: exact solve after a release
 PROGRESS_EVERY_S = 1.0
+#: seconds between the progress reports of a long r-ring build, and the shortest build
+#: (estimated) that reports: the page shows a bar and a Cancel button
+BUILD_PROGRESS_EVERY_S = 0.25
+BUILD_PROGRESS_FROM_S = 1.0
 
 
 @dataclasses.dataclass
@@ -89,6 +94,9 @@ class SolveRequest:
     init: np.ndarray | None = None  # start shape; default: the worker's last shape
     #: a drag in progress: a large mesh's proxy preview is enough (the release is not live)
     live: bool = False
+    #: painted rigid parts and shared-rotation groups (a VertexGroups; None for none), read
+    #: by the methods that take them (the registry's ``MethodInfo.groups``)
+    groups: Any = None
     t_submit: float = dataclasses.field(default_factory=time.perf_counter)
     seq: int = 0
 
@@ -124,12 +132,25 @@ class SolveUpdate:
     #: dragging); None for a full-resolution shape
     proxy_mesh: Any = None
     proxy_vertices: np.ndarray | None = None
+    #: a long r-ring build in progress: (fraction done, estimated seconds, what it costs);
+    #: such an update has no shape and is not final
+    building: tuple[float, float, str] | None = None
 
 
-def _coarse_to_fine(mesh: Any, s: SolverSettings) -> bool:
+def _coarse_to_fine(mesh: Any, s: SolverSettings, groups: Any = None) -> bool:
     """Whether ``mesh`` is solved coarse to fine with these settings (by size unless they
-    say; never a volume, whose tet graph has no surface to decimate)."""
-    return not s.volumetric and coarse_to_fine(mesh, s.multires, {"energy": s.method})
+    say; never a volume, whose tet graph has no surface to decimate, nor with groups,
+    which have no proxy)."""
+    return not s.volumetric and coarse_to_fine(mesh, s.multires,
+                                               {"energy": s.method, "groups": groups})
+
+
+def _groups_for(req: SolveRequest) -> Any:
+    """The request's groups where its method reads them (surface methods with the
+    registry's ``groups`` capability), else None: as a painted r is for one without a
+    rigidity map, the painting is kept and ignored."""
+    s = req.settings
+    return req.groups if s.info.groups and not s.volumetric else None
 
 
 def _build(req: SolveRequest, rings: Any, s: SolverSettings) -> Any:
@@ -139,7 +160,8 @@ def _build(req: SolveRequest, rings: Any, s: SolverSettings) -> Any:
     # a weighting the shape does not take (a mesh's kind on a point cloud, from a session
     # or the defaults) gives way to the shape's own: the panel offers the shape's kinds
     weights = s.weights if s.weights in domain_of(req.mesh).weight_kinds else None
-    if _coarse_to_fine(req.mesh, s):
+    groups = _groups_for(req)
+    if _coarse_to_fine(req.mesh, s, groups):
         # the proxy previews at once; the full factor is built in the background once the
         # first preview is out (started earlier, it competes with that preview)
         return MultiresDeformer(req.mesh, req.handles, rings, weights, energy=s.method,
@@ -147,7 +169,8 @@ def _build(req: SolveRequest, rings: Any, s: SolverSettings) -> Any:
     # chosen above: not again by size
     return Deformer(req.mesh, req.handles, rings=rings, energy=s.method, weights=weights,
                     tol=s.tol, max_iter=s.max_iter, multires=False,
-                    **({"volumetric": True} if s.volumetric else {}))
+                    **({"volumetric": True} if s.volumetric else {}),
+                    **({} if groups is None else {"groups": groups}))
 
 
 class _Engine:
@@ -166,8 +189,11 @@ class _Engine:
         info = s.info
         # only a method with a rigidity map reads the painted one; the others ignore it
         rings = req.rings if info.rigidity_map else 1
-        # a volumetric deformer tetrahedralises once per mesh: kept while handles and r change
-        key = (id(req.mesh), s.weights, s.method, s.volumetric, s.multires)
+        # a volumetric deformer tetrahedralises once per mesh: kept while handles and r change;
+        # a large mesh with groups is solved at full resolution, without them coarse to fine
+        groups = _groups_for(req)
+        key = (id(req.mesh), s.weights, s.method, s.volumetric, s.multires,
+               _coarse_to_fine(req.mesh, s, groups))
         if self.deformer is None or self._key != key:
             self.deformer = _build(req, rings, s)
             self._key = key
@@ -178,6 +204,8 @@ class _Engine:
             d.set_rings(req.rings)
         if not np.array_equal(d.handles, req.handles):
             d.set_handles(req.handles)
+        if not _same_groups(getattr(d, "groups", None), groups):
+            d.set_groups(groups)
         return d
 
     def laplacian_editor(self, req: SolveRequest) -> Any:
@@ -379,9 +407,33 @@ class SolveWorker:
         self._emit(req, V, np.nan, 1, True, True, setup_ms=setup)
         self._record_latency(req)
 
+    def _build_progress(self, req: SolveRequest) -> Callable[[float, Any], bool]:
+        """The ring build's progress callback: reports a long build now and then, and
+        cancels it as soon as a newer request waits (a new r, an undo, Cancel)."""
+        last = [-1.0]
+
+        def report(fraction: float, cost: Any) -> bool:
+            if self.has_newer:
+                return True
+            now = time.perf_counter()
+            if cost.seconds >= BUILD_PROGRESS_FROM_S and (
+                    now - last[0] >= BUILD_PROGRESS_EVERY_S or fraction >= 1.0):
+                last[0] = now
+                self._emit(req, None, np.nan, 0, False, False,
+                           building=(fraction, cost.seconds, cost.describe()))
+            return False
+
+        return report
+
     def _solve_iterative(self, req: SolveRequest, t0: float) -> None:
         s = req.settings
-        d = self._engine.deformer_for(req)
+        try:
+            # a large r's rings take seconds to minutes: built here, off the page's
+            # thread, with progress, and given up for a newer request
+            with ring_progress(self._build_progress(req)):
+                d = self._engine.deformer_for(req)
+        except BuildCancelled:
+            return  # the newer request runs next, from the deformer as it was
         setup = (time.perf_counter() - t0) * 1e3
         if isinstance(d, MultiresDeformer):
             self._solve_coarse_to_fine(req, d, setup)
@@ -534,6 +586,14 @@ class SolveWorker:
 _ONE_SHOT: dict[str, Callable[[SolveWorker, SolveRequest, float], None]] = {
     "laplacian": SolveWorker._solve_laplacian,
 }
+
+
+def _same_groups(a: Any, b: Any) -> bool:
+    """Whether two VertexGroups (or None) are the same groups."""
+    if a is None or b is None:
+        return a is b
+    return (a.names == b.names and np.array_equal(a.rigid, b.rigid)
+            and np.array_equal(a.ids, b.ids))
 
 
 def _energy_unit(deformer: Any) -> float:

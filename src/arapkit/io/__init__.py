@@ -51,6 +51,7 @@ from .formats import (
     mesh_format,
     readable_formats,
 )
+from .groups import groups_to_json, load_groups, parse_groups, save_groups
 from .handles import (
     COMMENT_KEY,
     GROUP_KEYS,
@@ -85,10 +86,12 @@ __all__ = [
     "atomic_write",
     "check_figure_format",
     "check_output_path",
+    "groups_to_json",
     "handles_to_json",
     "int_tokens",
     "is_readable_mesh",
     "load_def",
+    "load_groups",
     "load_handles",
     "load_mesh",
     "load_numpy",
@@ -97,6 +100,7 @@ __all__ = [
     "load_sel",
     "load_shape",
     "mesh_format",
+    "parse_groups",
     "parse_handles",
     "ply_property_column",
     "read_ply",
@@ -105,6 +109,7 @@ __all__ = [
     "readable_formats",
     "rotation_matrix",
     "save_def",
+    "save_groups",
     "save_handles",
     "save_mesh",
     "save_points",

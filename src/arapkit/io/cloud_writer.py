@@ -224,6 +224,9 @@ def _text(fmt: str, V, attrs, normals) -> tuple[bytes, set[str]]:
         kept.add("colours")
     elif fmt == "xyz" and src == "xyz":
         extra, _ = _extra(attrs), kept.add("extra")
+        if normals is not None and attrs.normals is not None:  # x y z nx ny nz rows again
+            extra = normals if extra is None else np.hstack([normals, extra])
+            kept.add("normals")
     if fmt in ("xyzn", "xyzrgb") and extra is None:
         raise InputError(f"{fmt}: this point cloud has no "
                          f"{'normals' if fmt == 'xyzn' else 'colours'} to write")

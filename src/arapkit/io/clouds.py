@@ -1,9 +1,11 @@
 """Reading point clouds: files without faces, with every per-point value they carry.
 
 A PLY, OBJ or OFF file with vertices and no faces, a ``.xyz`` text file (``.xyzn`` with
-normals, ``.xyzrgb`` with colours, Open3D's conventions) and a ``.npy`` array of shape
-(n, 3) load as a :class:`~arapkit.mesh.cloud.PointCloud` (:func:`load_points`). Normals
-(PLY ``nx ny nz``, ``.xyzn``, NOFF), colours and every other PLY vertex property are kept in
+normals, ``.xyzrgb`` with colours, Open3D's conventions; ``.txt`` and ``.pts`` read as
+``.xyz``) and a ``.npy`` array of shape (n, 3), or (n, 6) with normals, load as a
+:class:`~arapkit.mesh.cloud.PointCloud` (:func:`load_points`). Normals (PLY ``nx ny nz``,
+``.xyzn``, NOFF, a ``.xyz`` whose rows are ``x y z nx ny nz``), colours and every other PLY
+vertex property are kept in
 the cloud's :class:`~arapkit.mesh.attributes.MeshAttributes`, so that
 ``save_mesh(path, result, like=cloud)`` writes them back (:mod:`arapkit.io.cloud_writer`).
 :func:`load_shape` is what the doors read: a file with faces is a mesh, loaded by
@@ -37,14 +39,22 @@ from .cloud_writer import CLOUD_WRITE_FORMATS, cloud_format
 from .formats import MESH_FORMATS, mesh_format, readable_formats
 from .readers import PARTS_FORMATS, load_mesh, mesh_from_parts, read_file, read_parts
 
-__all__ = ["CLOUD_READ_FORMATS", "XYZ_FORMATS", "check_shape_output", "cloud_formats_text",
+__all__ = ["CLOUD_READ_FORMATS", "XYZ_ALIASES", "XYZ_FORMATS", "check_shape_output",
+           "cloud_formats_text",
            "is_cloud_file", "load_points", "load_shape", "normals_of", "shape_formats_text"]
 
 #: the text formats of points, one row a point (Open3D's names): x y z [anything], with
 #: normals, with colours
 XYZ_FORMATS = ("xyz", "xyzn", "xyzrgb")
-#: every format :func:`load_points` reads (a ``.gz`` suffix may follow the text ones)
+#: other names of ``.xyz`` text that scanners and the template fit's first reader used
+XYZ_ALIASES = ("txt", "pts")
+#: every format :func:`load_points` reads (a ``.gz`` suffix may follow the text ones),
+#: besides :data:`XYZ_ALIASES`
 CLOUD_READ_FORMATS = (*PARTS_FORMATS, *XYZ_FORMATS, "npy")
+#: a ``.xyz`` row's numbers 4-6 are read as its normal when every row's have about unit
+#: length (``x y z nx ny nz``, as CloudCompare and MeshLab write): colours or other values
+#: are not unit vectors; the slack allows for normals rounded to a few decimals
+_UNIT_SLACK = 0.02
 #: PLY's names of a vertex normal
 _NORMAL_PROPS = ("nx", "ny", "nz")
 
@@ -59,10 +69,10 @@ def is_cloud_file(path: str | os.PathLike) -> bool:
 
     Examples
     --------
-    >>> is_cloud_file("scan.XYZ"), is_cloud_file("scan.ply")
-    (True, False)
+    >>> is_cloud_file("scan.XYZ"), is_cloud_file("scan.pts"), is_cloud_file("scan.ply")
+    (True, True, False)
     """
-    return _ext(os.fspath(path)) in (*XYZ_FORMATS, "npy")
+    return _ext(os.fspath(path)) in (*XYZ_FORMATS, *XYZ_ALIASES, "npy")
 
 
 def normals_of(attrs: MeshAttributes) -> np.ndarray | None:
@@ -79,14 +89,16 @@ def normals_of(attrs: MeshAttributes) -> np.ndarray | None:
     p = attrs.vertex_properties
     if all(isinstance(p.get(c), np.ndarray) for c in _NORMAL_PROPS):
         return np.stack([p[c].astype(np.float64) for c in _NORMAL_PROPS], axis=1)
-    if attrs.normals is not None and attrs.source_format in ("off", "xyzn"):
-        return np.asarray(attrs.normals, dtype=np.float64)  # NOFF's, .xyzn's: one per point
+    if attrs.normals is not None and attrs.source_format in ("off", "xyzn", "xyz", "npy"):
+        # NOFF's, .xyzn's, a .xyz's or a .npy's with normals: one per point
+        return np.asarray(attrs.normals, dtype=np.float64)
     return None
 
 
 def _xyz(data: bytes, ext: str, path: str) -> tuple[np.ndarray, MeshAttributes]:
     """Rows of numbers: x y z, then (``.xyzn``) normals or (``.xyzrgb``) colours or,
-    for ``.xyz``, whatever else every row carries (kept verbatim)."""
+    for ``.xyz``, normals where every row is ``x y z`` and a unit vector, else whatever
+    else every row carries (kept verbatim)."""
     text = data.decode("utf-8", "replace")
     rows, lines = [], []
     for lineno, line in enumerate(text.splitlines(), 1):
@@ -95,12 +107,12 @@ def _xyz(data: bytes, ext: str, path: str) -> tuple[np.ndarray, MeshAttributes]:
             rows.append(line.replace(",", " ").split())
             lines.append(lineno)
     if not rows:
-        raise InputError(f"{path}: no points (the file has no rows of numbers)")
+        raise InputError(f"{path}: the point cloud is empty (no rows of numbers)")
     width = {"xyzn": 6, "xyzrgb": 6}.get(ext, 3)
     short = next((i for i, r in enumerate(rows) if len(r) < width), None)
     if short is not None:
-        raise InputError(f"{path}: line {lines[short]}: a row of .{ext} needs {width} "
-                         f"numbers, found {len(rows[short])}")
+        raise InputError(f"{path}: line {lines[short]} has {len(rows[short])} numbers: a "
+                         f"row of .{ext} needs {width}")
     take = min(len(r) for r in rows)
     try:
         A = np.array([r[:take] for r in rows], dtype=np.float64)
@@ -110,7 +122,11 @@ def _xyz(data: bytes, ext: str, path: str) -> tuple[np.ndarray, MeshAttributes]:
                          f"{' '.join(rows[bad])!r}") from None
     none = np.zeros(0, dtype=np.int64)
     attrs = MeshAttributes(ext, none, none)
-    first = 6 if ext in ("xyzn", "xyzrgb") else 3
+    if ext == "xyz" and take == 6 and all(len(r) == 6 for r in rows):
+        length = np.linalg.norm(A[:, 3:6], axis=1)
+        if bool((np.abs(length - 1.0) <= _UNIT_SLACK).all()):
+            attrs.normals = A[:, 3:6] / length[:, None]
+    first = 6 if ext in ("xyzn", "xyzrgb") or attrs.normals is not None else 3
     if ext == "xyzn":  # normals, one per point (no corner table: a cloud has no corners)
         attrs.normals = A[:, 3:6].copy()
     elif ext == "xyzrgb":  # colours as PLY's: bytes where the file counts to 255
@@ -133,13 +149,18 @@ def _numeric(tokens: list[str]) -> bool:
 
 
 def _npy(path: str) -> tuple[np.ndarray, MeshAttributes]:
+    """Positions (n, 3), or positions then normals (n, 6)."""
     A = load_numpy(path)
-    if A.ndim != 2 or A.shape[1] != 3:
-        raise InputError(f"{path}: a point cloud array must have shape (n, 3), got {A.shape}")
+    if A.ndim != 2 or A.shape[1] not in (3, 6):
+        raise InputError(f"{path}: a point cloud array must have shape (n, 3), or (n, 6) "
+                         f"with normals, got {A.shape}")
     if A.dtype.kind not in "iuf":
         raise InputError(f"{path}: a point cloud array must hold numbers, got {A.dtype}")
-    return A.astype(np.float64), MeshAttributes("npy", np.zeros(0, dtype=np.int64),
-                                                np.zeros(0, dtype=np.int64))
+    A = A.astype(np.float64)
+    attrs = MeshAttributes("npy", np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    if A.shape[1] == 6:
+        attrs.normals = np.ascontiguousarray(A[:, 3:])
+    return np.ascontiguousarray(A[:, :3]), attrs
 
 
 def _cloud(V, attrs: MeshAttributes, name: str, neighbours, radius) -> PointCloud:
@@ -164,6 +185,10 @@ def _read_cloud(path: str, neighbours, radius, faces_ok: bool) -> Mesh | PointCl
             raise InputError(f"{path}: a .npy array cannot be gzipped (save it as .npy)")
         V, attrs = _npy(path)
         return _cloud(V, attrs, name, neighbours, radius)
+    if ext in XYZ_ALIASES:
+        data, _ = read_file(path)
+        V, attrs = _xyz(data, "xyz", path)
+        return _cloud(V, attrs, name, neighbours, radius)
     if ext not in CLOUD_READ_FORMATS:
         if faces_ok:  # STL and unknown extensions: the mesh reader's own words
             return load_mesh(path)
@@ -186,7 +211,9 @@ def _read_cloud(path: str, neighbours, radius, faces_ok: bool) -> Mesh | PointCl
 def load_points(path: str | os.PathLike, *, neighbours: int | None = None,
                 radius: float | None = None) -> PointCloud:
     """Load a point cloud: the vertices of a PLY, OBJ or OFF file (its faces, if any, are
-    not used), the rows of a ``.xyz`` / ``.xyzn`` / ``.xyzrgb`` file, or an (n, 3) ``.npy``.
+    not used), the rows of a ``.xyz`` / ``.xyzn`` / ``.xyzrgb`` file (``.txt`` and
+    ``.pts`` are read as ``.xyz``, whose rows may be ``x y z nx ny nz``), or a ``.npy`` of
+    shape (n, 3), or (n, 6) with normals.
 
     Every other per-point value the file carries (normals, colours, PLY properties of any
     name and type, numbers after x y z) is kept in ``cloud.attributes`` and written back

@@ -55,6 +55,7 @@ __all__ = [
     "load_handles",
     "parse_handles",
     "save_handles",
+    "select_vertices",
 ]
 
 SELECTION_KEYS = ("indices", "box", "sphere", "nearest")
@@ -162,6 +163,22 @@ def _select(group: dict, vertices: np.ndarray, err: HandleContext) -> np.ndarray
     if sel.size == 0:
         raise err(f"{kind} selects no vertices")
     return sel
+
+
+def select_vertices(entry: dict, vertices: np.ndarray, err) -> np.ndarray:
+    """The vertices one entry of a handle or groups file selects: exactly one of
+    ``indices``, ``box``, ``sphere`` or ``nearest`` (checked; ``err(message)`` makes the
+    error, naming the file and the entry). Groups files (:mod:`arapkit.io.groups`) share
+    the handle files' selectors through this.
+
+    Examples
+    --------
+    >>> V = np.array([[0.0, 0, 0], [1, 0, 0], [2, 0, 0]])
+    >>> select_vertices({"sphere": {"center": [2, 0, 0], "radius": 1.5}}, V,
+    ...                 HandleContext("h.json", 1, None)).tolist()
+    [1, 2]
+    """
+    return _select(entry, vertices, err)
 
 
 def _move(group: dict, rest: np.ndarray, err: HandleContext) -> tuple[np.ndarray, str]:

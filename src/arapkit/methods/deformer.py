@@ -31,168 +31,41 @@ Constraints and the Cholesky factor are in :mod:`arapkit.arap.constraints`.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
 
 import numpy as np
 
 from ..arap.backends import DEVICES, check_device, make_backend  # noqa: F401 - DEVICES: what device= takes
 from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
 from ..arap.domains import domain_of
-from ..arap.energies import energy_info
 from ..arap.energies.rring import check_ring_scale
-from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
 from ..arap.graph import bandwidth_order, unit_scale
 from ..arap.loop import Result, local_global, start_energy, with_progress
 from ..arap.problem import ARAPProblem
 from ..arap.rings import Neighbourhoods, check_rings
 from ..errors import Advice, InputError
-from ..mesh.cloud import PointCloud, as_shape
+from ..mesh.cloud import PointCloud
 from ..mesh.model import Mesh
+from ..mesh.planar import PlanarInput
 from ..mesh.weights import SOUND_WEIGHTS
 from ..validate import integer, iteration_cap, real_array, tolerance
-from .registry import INTERFACES, MethodInfo, MethodOption, method, method_names, methods, register
+from .dispatch import (
+    INITS,
+    MULTIRES_AUTO_VERTICES,
+    check_domain,
+    check_method,
+    coarse_to_fine,
+    refuse_acceleration,
+    register_variant,
+    variant,
+)
+from .grouping import backend_for, grouped_problem, refuse_groups, ungrouped
+from .planar import PlanarSolver, in_plane, planar_start, planar_targets, rings_or_preset, solve_dim
+from .registry import method
 
-__all__ = ["Deformer", "Result", "check_handles", "anchor_components", "CholeskyFactor",
-           "bandwidth_order", "check_domain", "check_method", "coarse_to_fine",
-           "register_variant", "unit_scale"]
-
-INITS = ("identity", "laplacian")
-#: ``multires=None`` (the default) solves coarse to fine from this many vertices: below it
-#: a plain solve is already interactive, above it hundreds of full iterations are not
-MULTIRES_AUTO_VERTICES = 100_000
-
-
-def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
-    """A method of the local/global loop: what its energy's form fixes comes from the energy.
-
-    Anderson acceleration keeps an extrapolation only when it lowers the energy, a safeguard
-    that holds for descent methods alone.
-    """
-    en = energy_info(name)
-    return MethodInfo(name, label, local_global=True, descent=en.descent,
-                      rigidity_map=en.rigidity_map, accelerate=en.descent,
-                      multires=en.descent, needs_faces=en.faces_needed({}), **kw)
-
-
-register(_local_global_method("rring", "r-ring ARAP", volumetric=True))
-# compare runs the paper's comparison set, which has no spokes-and-rims
-register(_local_global_method("spokes-and-rims", "spokes-and-rims ARAP",
-                              interfaces=frozenset(INTERFACES) - {"compare"}))
-register(_local_global_method(
-    "sr-arap", "SR-ARAP",
-    # sr_roi's vertex ids are checked where the mesh is known (make_energy)
-    options={"sr_alpha": MethodOption("alpha", DEFAULT_ALPHA, check_alpha, "alpha = {:g}"),
-             "sr_roi": MethodOption("roi", None, lambda roi: roi)},
-    interfaces=frozenset(INTERFACES) - {"torch"},
-    why_not={"torch": "its rotation coupling has no per-step fixed point"}))
-
-
-def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None) -> dict:
-    """Validate a method name and its options; return the method's options.
-
-    Examples
-    --------
-    >>> check_method("sr-arap", "0.1")
-    {'alpha': 0.1}
-    """
-    names = method_names("library")
-    if energy not in names:
-        raise InputError(f"unknown energy '{energy}' (use one of {', '.join(names)})")
-    info = method(energy)
-    given = {"sr_alpha": sr_alpha, "nodes": nodes, "sr_roi": sr_roi}
-    for name, value in given.items():
-        if value is not None and name not in info.options:
-            owner = next(m.name for m in methods("library") if name in m.options)
-            raise InputError(f"{name} is an option of energy '{owner}', not '{energy}'")
-    options = {opt.key: opt.check(opt.default if given.get(name) is None else given[name])
-               for name, opt in info.options.items()}
-    # an option without a default is left out unless given
-    return {key: value for key, value in options.items() if value is not None}
-
-
-def check_domain(shape, energy: str = "rring", *, volumetric: bool = False,
-                 init="identity") -> None:
-    """Refuse, in one line, what ``shape``'s domain cannot do: a method defined on
-    triangles (the registry's ``needs_faces``), a volume or a Laplacian start on a point
-    cloud.
-
-    Examples
-    --------
-    >>> from arapkit.mesh.cloud import PointCloud
-    >>> check_domain(PointCloud(np.eye(3), name="c.ply"), "sr-arap")
-    Traceback (most recent call last):
-    ...
-    arapkit.errors.InputError: c.ply: energy='sr-arap' needs a triangle mesh and c.ply is ...
-    """
-    dom = domain_of(shape)
-    if dom.has_faces:
-        return
-    name = shape.name
-    what = f" and {name} is a {dom.label}"
-    if energy in method_names("library") and not method(energy).applies_to(False):
-        fits = [m.name for m in methods("library") if m.applies_to(False)]
-        raise InputError(Advice("{energy} needs a triangle mesh", energy=energy).after(
-            f"{name}: ").before(f"{what} (methods for point clouds: {', '.join(fits)})"))
-    if volumetric:
-        raise InputError(f"{name}: volumetric ARAP fills a closed triangle surface{what}")
-    if isinstance(init, str) and init == "laplacian":
-        raise InputError(Advice("{init} (Laplacian editing) needs a triangle mesh",
-                                init="laplacian").after(f"{name}: ").before(what))
-
-
-def _refuse_acceleration(info: MethodInfo, remedy: str = "") -> None:
-    if not info.accelerate:
-        raise InputError(f"accelerate: Anderson acceleration is for the local/global "
-                         f"descent methods; energy '{info.name}' is not one{remedy}")
-
-
-#: the classes ``Deformer(..., <name>=True)`` returns instead (``volumetric``, ``multires``),
-#: registered by their own modules (:mod:`arapkit.methods.volumetric` and
-#: :mod:`arapkit.methods.multires` register themselves)
-_VARIANTS: dict[str, type] = {}
-
-
-def register_variant(flag: str, cls: type) -> type:
-    """Make ``Deformer(..., <flag>=True)`` return ``cls(mesh, handles, rings, **options)``.
-
-    ``cls`` takes the Deformer's keyword options, less the method's (``energy``,
-    ``sr_alpha``, ``sr_roi``, ``nodes``), which :class:`Deformer` checks first.
-
-    Examples
-    --------
-    >>> from arapkit.methods.volumetric import VolumetricDeformer
-    >>> register_variant("volumetric", VolumetricDeformer) is VolumetricDeformer
-    True
-    """
-    _VARIANTS[flag] = cls
-    return cls
-
-
-def coarse_to_fine(mesh: Mesh, multires: bool | None, options: dict) -> bool:
-    """Whether ``Deformer(..., multires=...)`` solves coarse to fine.
-
-    ``None`` (the default) means: for a method that can, on a mesh of at least
-    :data:`MULTIRES_AUTO_VERTICES` vertices, unless the caller asked for a start of its own
-    (``init``) or a partial SR-ARAP region.
-
-    Examples
-    --------
-    >>> from arapkit.mesh.shapes import bar
-    >>> coarse_to_fine(bar(), None, {}), coarse_to_fine(bar(), True, {})
-    (False, True)
-    """
-    energy = options.get("energy", "rring")
-    if energy not in method_names("library"):
-        return False  # Deformer itself says which names there are
-    info = method(energy)
-    if multires is None:
-        return (info.multires and mesh.n_vertices >= MULTIRES_AUTO_VERTICES
-                and options.get("init", "identity") == "identity"
-                and options.get("sr_roi") is None)
-    if multires and not info.multires:
-        raise InputError(f"multires=True: energy '{info.name}' cannot be solved coarse to "
-                         "fine (a local/global descent method can)")
-    return bool(multires)
+# the method choice moved to .dispatch; its names stay importable from here
+__all__ = ["INITS", "MULTIRES_AUTO_VERTICES", "Deformer", "Result", "check_handles",
+           "anchor_components", "CholeskyFactor", "bandwidth_order", "check_domain",
+           "check_method", "coarse_to_fine", "register_variant", "unit_scale"]
 
 
 def _rows(ptr: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -220,26 +93,30 @@ class Deformer:
     Parameters
     ----------
     mesh : Mesh, PointCloud, Graph, a (vertices, faces) pair, a trimesh.Trimesh, or points
-        The shape (:func:`arapkit.mesh.cloud.as_shape`): a triangle mesh, or a point cloud
-        (an :class:`arapkit.PointCloud`, an ``(n, 3)`` array, an Open3D or trimesh point
+        The shape (:func:`arapkit.mesh.cloud.as_shape`): a triangle mesh (a pair may hold
+        ``(n, 2)`` positions: a planar shape, solved in 2D), or a point cloud (an
+        :class:`arapkit.PointCloud`, an ``(n, 3)`` array, an Open3D or trimesh point
         cloud) solved on its neighbourhood graph, or an :class:`arapkit.Graph` of your
         own edges. Methods defined on triangles refuse a point cloud (``docs/clouds.md``).
     handles : (h,) int, (n,) bool, or a HandleSet
         Vertices with positional constraints (a mask selects its True vertices; a
         :func:`arapkit.load_handles` set stands for its indices).
-    rings : int or (n,) int
+    rings : int, (n,) int or a preset name
         Neighbourhood size r per vertex (1 = standard ARAP; larger = stiffer). Only for
-        ``energy="rring"``.
+        ``energy="rring"``. A rigidity preset ("distort", "normal", "rigid") stands for its
+        r (:data:`arapkit.methods.planar.PRESETS`).
     weights : str or (m,) array, optional
         Edge weights. On a mesh ``"cotan"``, ``"cotan-clamped"`` (the default),
         ``"cotan-clamped-each"`` or ``"uniform"`` (:mod:`arapkit.mesh.weights`); on a point
         cloud ``"gaussian"`` (the default), ``"uniform"`` or ``"laplacian"``
         (:mod:`arapkit.mesh.cloud_weights`); or one positive weight per edge. None: the
         shape's default (a :class:`arapkit.Graph`'s own weights where it has them).
-    energy : {"rring", "spokes-and-rims", "sr-arap", "embedded"}
+    energy : {"rring", "spokes-and-rims", "sr-arap", "smooth-arap", "embedded"}
         The method (see ``docs/methods.md``): r-ring ARAP (Chen et al. 2017),
         spokes-and-rims ARAP (Chao et al. 2010), smooth-rotation ARAP (Levi & Gotsman
-        2014) or embedded deformation (Sumner et al. 2007, :mod:`arapkit.methods.embedded`).
+        2014), Smooth ARAP (Oehri et al. 2025: no spike under a single-vertex handle,
+        ``docs/smooth-arap.md``) or embedded deformation (Sumner et al. 2007,
+        :mod:`arapkit.methods.embedded`).
     sr_alpha : float, optional
         SR-ARAP's rotation-smoothness weight (default 0.02, CGAL's), scaled by the surface
         area as CGAL does.
@@ -251,6 +128,9 @@ class Deformer:
         rotation is coupled to all its neighbours' (``docs/methods.md``).
     nodes : int, optional
         Embedded deformation's graph size (default 200, at most the vertex count).
+    smooth_lambda : float, optional
+        Smooth ARAP's weight of the Laplacian term, in [0, 1) (default 0.99, the paper's;
+        0 is ARAP): see :mod:`arapkit.arap.energies.smooth_arap`.
     ring_scale : float
         r is counted in the rings of a mesh whose edges are ``ring_scale`` times this
         one's (default 1: this mesh's own). A decimated copy of a mesh, solved with the
@@ -260,6 +140,15 @@ class Deformer:
         (``r s < 1``) it blends in a rotation per triangle
         (:mod:`arapkit.arap.energies.rring`). Coarse to fine sets it for its proxy.
         ``energy="rring"`` only; the CPU device only below 1.
+    groups : VertexGroups or (n,) int, optional
+        Vertex groups (:class:`arapkit.mesh.groups.VertexGroups`, e.g. from
+        :func:`arapkit.io.load_groups`): **rigid parts**, whose vertices move by one rigid
+        motion (solved exactly: a handle inside one moves the whole part), and
+        **shared-rotation groups**, libigl's ``ARAPData.G`` (one rotation, free positions).
+        A plain array is libigl's ``G``: one id per vertex, shared rotations, -1 for none.
+        For the methods the registry says take them (``MethodInfo.groups``: r-ring and
+        spokes-and-rims ARAP); they mix with a rigidity map and with handles. See
+        ``docs/groups.md``.
     tol : float
         Stop when ``|E_{t-1} - E_t| / |E_{t-1}| < tol`` (the paper's test, gamma = 1e-3).
     max_iter : int
@@ -281,6 +170,11 @@ class Deformer:
     reorder : bool
         Work internally in a bandwidth-reducing vertex order (results are returned in the
         mesh's order and agree with ``reorder=False`` to round-off).
+    dim : {None, 2, 3}
+        None: 2 for a planar shape with a method that runs in the plane, else 3
+        (:func:`arapkit.methods.planar.solve_dim`, ``docs/2d.md``).
+    flips : {"prevent", "allow"}
+        2D: keep every triangle unfolded (:mod:`arapkit.arap.flips`), or plain ARAP.
     device : {"cpu", "auto", "cuda", "cuda:N", "torch-cpu"}
         Where to solve: "cpu" runs the numba kernels; "cuda" (and "torch-cpu", the same
         code on CPU tensors) the torch backend of :mod:`arapkit.arap.backends.torch_backend` (extra
@@ -320,43 +214,59 @@ class Deformer:
     >>> fast = Deformer(mesh, h, rings=2, accelerate=True).solve(t, tol=1e-6)
     >>> bool(fast.energy <= res.energy)
     True
+
+    A rigid part in the middle of the bar keeps its shape while the rest bends:
+
+    >>> from arapkit.mesh.groups import VertexGroups
+    >>> middle = np.flatnonzero(np.abs(mesh.vertices[:, 0] - 4) < 1)
+    >>> part = VertexGroups.from_lists([("middle", middle, True)], mesh.n_vertices)
+    >>> bent = Deformer(mesh, h, groups=part).solve(t).vertices
+    >>> i, j = middle[0], middle[-1]
+    >>> d0, d1 = (np.linalg.norm(X[i] - X[j]) for X in (mesh.vertices, bent))
+    >>> bool(abs(d1 - d0) < 1e-9 * d0)
+    True
     """
 
     def __new__(cls, mesh: Mesh | PointCloud, handles, rings=1, weights: str | None = None,
                 *, volumetric: bool = False, density: float | None = None,
                 multires: bool | None = None, proxy_vertices: int | None = None,
                 levels=None, **options):
-        mesh = as_shape(mesh)
+        shape = PlanarInput.of_shape(mesh)  # a mesh, or a point cloud (solved in 3D)
+        mesh = shape.mesh
         check_domain(mesh, options.get("energy", "rring"), volumetric=volumetric,
                      init=options.get("init", "identity"))
         if not volumetric:
             if density is not None:
                 raise InputError("density is an option of volumetric=True")
-            if coarse_to_fine(mesh, multires, options):
+            if not in_plane(shape, multires, options) and coarse_to_fine(mesh, multires,
+                                                                         options):
                 if proxy_vertices is not None:
                     options["proxy_vertices"] = proxy_vertices
                 if levels is not None:
                     options["levels"] = levels
-                return _VARIANTS["multires"](mesh, handles, rings, weights, **options)
+                return variant("multires")(mesh, handles, rings, weights, **options)
             for name, value in (("proxy_vertices", proxy_vertices), ("levels", levels)):
                 if value is not None:
                     raise InputError(f"{name} is an option of multires=True")
             obj = super().__new__(cls)
             # __init__ receives the caller's mesh again: a trimesh is converted once, here
-            obj._checked_mesh = mesh
+            obj._checked_shape = shape
             return obj
         if multires:
             raise InputError("multires=True is for surfaces; volumetric=True solves the "
                              "volume directly")
+        if options.get("groups") is not None:
+            raise InputError("groups: vertex groups are for surface ARAP, not "
+                             "volumetric=True (the volume's interior vertices have none)")
         energy = options.pop("energy", "rring")
         check_method(energy, options.pop("sr_alpha", None), options.pop("nodes", None),
-                     options.pop("sr_roi", None))
+                     options.pop("sr_roi", None), options.pop("smooth_lambda", None))
         if not method(energy).volumetric:
             raise InputError(f"volumetric=True runs r-ring ARAP; energy '{energy}' is for "
                              "surfaces")
         if density is not None:
             options["density"] = density
-        return _VARIANTS["volumetric"](mesh, handles, rings, **options)
+        return variant("volumetric")(mesh, handles, rings, **options)
 
     def __init__(
         self,
@@ -374,7 +284,9 @@ class Deformer:
         sr_alpha: float | None = None,
         sr_roi=None,
         nodes: int | None = None,
+        smooth_lambda: float | None = None,
         ring_scale: float = 1.0,
+        groups=None,
         tol: float = 1e-3,
         max_iter: int = 1000,
         init: str = "identity",
@@ -383,17 +295,25 @@ class Deformer:
         history: int = 5,
         reorder: bool = True,
         device: str = "cpu",
+        dim: int | None = None,
+        flips: str = "prevent",
     ) -> None:
         self.device = check_device(device)
-        options = check_method(energy, sr_alpha, nodes, sr_roi)
+        options = check_method(energy, sr_alpha, nodes, sr_roi, smooth_lambda)
         info = method(energy)
+        rings = rings_or_preset(rings)
         self.ring_scale = check_ring_scale(ring_scale)
         if self.ring_scale != 1.0:
             if not info.rigidity_map:
                 raise InputError(f"ring_scale: energy '{energy}' has no rigidity map")
             options["ring_scale"] = self.ring_scale
-        mesh = self.__dict__.pop("_checked_mesh", None) or as_shape(mesh)
+        shape = self.__dict__.pop("_checked_shape", None) or PlanarInput.of_shape(mesh)
+        mesh = shape.mesh
         self.mesh = mesh
+        #: the shape as given (2D or 3D) and the dimension it is solved in
+        self.shape = shape
+        self.dim = solve_dim(shape, dim, info.planar, energy)
+        self._plane = PlanarSolver(shape, flips, self.device)
         self.energy = energy
         # None: the shape's domain's own (cotan-clamped on a mesh, gaussian on a cloud)
         self.weights_kind = domain_of(mesh).default_weights if weights is None else weights
@@ -405,7 +325,7 @@ class Deformer:
         # None: the method's choice, which for a plain solve is off
         self.accelerate = None if accelerate is None else bool(accelerate)
         if self.accelerate:
-            _refuse_acceleration(info, " (use accelerate=False)")
+            refuse_acceleration(info, " (use accelerate=False)")
         self.history = integer(history, "history", lo=1, hi=1000)
         self.factorisations = 0
         self._laplacian_editor = None
@@ -415,33 +335,73 @@ class Deformer:
 
             if not np.all(np.asarray(rings) == 1):
                 raise InputError(f"energy '{energy}' has no rigidity map (rings must be 1)")
+            if groups is not None:
+                refuse_groups(energy)
+            self.groups = None
             self.embedded = EmbeddedDeformation(mesh, handles, options["nodes"])
             self.problem = None
             self._rings = np.ones(mesh.n_vertices, dtype=np.int32)
             self._weight_notes = []
             return
+        #: the vertex groups in use (None: none)
+        self.groups = None
         self.problem = ARAPProblem.from_mesh(
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
-            reorder=reorder, **options)
+            reorder=reorder, dim=self.dim, **options)
         if self.problem.weights_kind is not None:
             self.weights_kind = self.problem.weights_kind
         self._rings = self.problem.energy.rings[self.problem.iperm]
         if sr_roi is not None:
             _check_outside_roi_is_held(mesh, sr_roi, handles)
-        self.backend = make_backend(self.problem, self.device)
+        if groups is not None:
+            self.problem, self.groups = grouped_problem(self.problem, groups, energy,
+                                                        self.device)
+        self.backend = backend_for(self.problem, self.device)
         self._weight_notes = self._check_rest_is_minimum()
 
     # -- configuration (lazy refactorisation, as CGAL) -----------------------------
-    def set_handles(self, handles) -> None:
-        """Use a new handle set; the factorisation is redone at the next solve."""
+    def set_groups(self, groups) -> None:
+        """Use other vertex groups (a :class:`~arapkit.mesh.groups.VertexGroups`, one
+        shared-rotation id per vertex, or None for none); refactorises at the next solve.
+
+        Examples
+        --------
+        >>> from arapkit.mesh.groups import VertexGroups
+        >>> from arapkit.mesh.shapes import bar
+        >>> m = bar()
+        >>> d = Deformer(m, [0])
+        >>> d.set_groups(VertexGroups.from_lists([("tip", [1, 2, 3], True)], m.n_vertices))
+        >>> d.groups.names
+        ('tip',)
+        """
+        if self.problem is None:
+            if groups is not None:
+                refuse_groups(self.energy)
+            return
+        p = self.problem
+        plain, kept = ungrouped(p), None
+        new = plain
+        if groups is not None:  # checked first: a refusal keeps what is there
+            new, kept = grouped_problem(plain, groups, self.energy, self.device)
+        self.groups = kept
+        p.release_factor()
+        self.problem = new
+        self.backend = backend_for(self.problem, self.device)
+
+    def set_handles(self, handles, *, update_factor: bool | None = None) -> None:
+        """Use a new handle set; the factorisation is redone at the next solve, or, with
+        ``update_factor`` (None: in 2D), corrected (:mod:`arapkit.arap.pinupdate`)."""
         self._laplacian_editor = None
         if self.embedded is not None:
             from .embedded import EmbeddedDeformation
 
             self.embedded = EmbeddedDeformation(self.mesh, handles, len(self.embedded.nodes))
             return
-        new = self.problem.with_handles(handles)  # checked first: a bad set keeps the factor
-        self.problem.release_factor()  # not held beside the new one by whoever keeps this
+        update = self.dim == 2 if update_factor is None else bool(update_factor)
+        # checked first: a bad set keeps the factor
+        new = self.problem.with_handles(handles, update_factor=update)
+        if not new.factorised:
+            self.problem.release_factor()  # not held beside the new one by whoever keeps this
         self.problem = new
 
     def set_rings(self, rings) -> None:
@@ -451,10 +411,10 @@ class Deformer:
             if not np.all(np.asarray(rings) == 1):
                 raise InputError(f"energy '{self.energy}' has no rigidity map (rings must be 1)")
             return
-        r = check_rings(rings, p.n_vertices)  # a bad map is refused with the factor kept
+        r = check_rings(rings_or_preset(rings), p.n_vertices)  # a bad map: the factor is kept
         p.release_factor()  # of no use to the new map, and as large as the one to come
         self.problem = p.with_rings(r)
-        self.backend = make_backend(self.problem, self.device)
+        self.backend = backend_for(self.problem, self.device)
         self._rings = self.problem.energy.rings[self.problem.iperm]
         self._weight_notes = self._check_rest_is_minimum()
 
@@ -469,12 +429,13 @@ class Deformer:
         """
         if self.energy_is_sum_of_squares:
             return []
-        R = np.empty((self.problem.energy.n_owners, 3, 3))
-        R_prev = np.tile(np.eye(3), (len(R), 1, 1))
-        E_rest = self.backend.local(self.problem.vertices.copy(), R, R_prev)
+        d = self.problem.dim
+        R = np.empty((self.problem.energy.n_owners, d, d))
+        R_prev = np.tile(np.eye(d), (len(R), 1, 1))
+        E_rest = self.backend.local(self.problem.rest_positions.copy(), R, R_prev)
         if E_rest >= -1e-9 * abs(self.backend.rest_term):
             return []
-        bad = int(np.count_nonzero(np.abs(R - np.eye(3)).max(axis=(1, 2)) > 1e-6))
+        bad = int(np.count_nonzero(np.abs(R - np.eye(d)).max(axis=(1, 2)) > 1e-6))
         return [Advice(
             f"{int((self.w < 0).sum())} edges have negative cotangent weights and the rest "
             f"shape is not an energy minimum ({bad} neighbourhoods prefer a rotation at rest): "
@@ -536,7 +497,8 @@ class Deformer:
     def neighbourhoods(self) -> Neighbourhoods:
         """The neighbourhoods in use, relabelled to the mesh's vertex numbering.
 
-        No search is repeated: the solver's structure is permuted.
+        No search is repeated: the solver's structure is permuted. Edge ids index
+        ``mesh.edges``; Smooth ARAP's ids past them are its vertex pairs two rings apart.
         """
         p = self._local_global("neighbourhoods")
         nbh = p.energy.nbh
@@ -553,7 +515,7 @@ class Deformer:
             return
         if self.backend.problem is not self.problem or not self.problem.factorised:
             if self.backend.problem.energy is not self.problem.energy:
-                self.backend = make_backend(self.problem, self.device)
+                self.backend = backend_for(self.problem, self.device)
             was = self.problem.factorised
             self.backend.bind(self.problem)
             if not was and self.problem.elimination.factor is not None:
@@ -573,7 +535,8 @@ class Deformer:
         0.0
         """
         p = self._local_global("vertex_energy")
-        Pi = np.ascontiguousarray(np.asarray(P, dtype=np.float64)[p.perm] / p.scale)
+        P = np.asarray(P, dtype=np.float64)[:, :p.dim]
+        Pi = np.ascontiguousarray(P[p.perm] / p.scale)
         Ri = np.ascontiguousarray(np.asarray(R, dtype=np.float64)[p.perm])
         return self.backend.vertex_energy(Pi, Ri)[p.iperm] * (p.scale * p.scale)
 
@@ -595,11 +558,14 @@ class Deformer:
         True
         """
         p = self._local_global("energy_of")
-        T = check_targets(self.handles, targets)
+        d = p.dim
+        T = check_targets(self.handles, targets) if d == 3 else \
+            planar_targets(self.shape, self.handles, targets)[:, :2]
+        P = planar_start(self.shape, np.asarray(P, dtype=np.float64)) if d == 2 else P
         self.prepare()
         s = p.scale
-        R = np.empty((p.energy.n_owners, 3, 3))
-        R_prev = np.empty_like(R) if p.energy.coupling is not None else np.empty((0, 3, 3))
+        R = np.empty((p.energy.n_owners, d, d))
+        R_prev = np.empty_like(R) if p.energy.coupling is not None else np.empty((0, d, d))
         _, E = start_energy(p, self.backend, P, s, p.constrained_targets(T / s), R, R_prev)
         return float(E * s * s)
 
@@ -609,6 +575,8 @@ class Deformer:
             # 1.75M vertices, and a coarse-to-fine caller holds its own through the solve)
             P = (init if isinstance(init, np.ndarray) and init.dtype == np.float64
                  else real_array(init, "init"))
+            if targets.shape[1] == 2:  # a planar solve
+                return planar_start(self.shape, P)
             if P.shape != self.mesh.vertices.shape or not np.isfinite(P).all():
                 raise InputError(
                     f"init: expected finite positions of shape {self.mesh.vertices.shape}"
@@ -627,6 +595,10 @@ class Deformer:
 
             self._laplacian_editor = LaplacianEditor(
                 self.mesh, self.handles if p is None else p.constrained, "uniform")
+        if p is not None and targets.shape[1] == 2:  # in the plane: lifted and back
+            C = p.constrained_targets(targets)
+            C = np.concatenate([C, np.full((len(C), 1), self.shape.z)], axis=1)
+            return self._laplacian_editor.solve(C)[:, :2]
         return self._laplacian_editor.solve(targets if p is None else
                                             p.constrained_targets(targets))
 
@@ -640,15 +612,16 @@ class Deformer:
         callback: Callable[[int, float, np.ndarray], bool | None] | None = None,
         accelerate: bool | None = None,
         progress: Callable[[int, float], bool | None] | None = None,
+        angles=None,
     ) -> Result:
         """Deform so that the handles reach ``targets``.
 
         Parameters
         ----------
-        targets : (h, 3), or a HandleSet
+        targets : (h, 3), (h, 2) in 2D, or a HandleSet
             Positions of the handles, in the order of ``handles`` (a
             :func:`arapkit.load_handles` set stands for its targets).
-        init : None, "identity", "laplacian" or (n, 3) array
+        init : None, "identity", "laplacian" or (n, 3) array ((n, 2) in 2D)
             Starting point; an array is a warm start (e.g. the previous result).
         tol, max_iter : optional overrides of the constructor's values.
         callback : callable(iteration, energy, vertices) -> bool, optional
@@ -660,6 +633,10 @@ class Deformer:
             Called after every iteration (after ``callback``) without the shape: for a
             caller that reports progress or may interrupt the solve on a large mesh.
             Returning True stops the loop.
+        angles : (h,) float, optional
+            2D only: a turn per handle in radians (NaN: none), Photoshop's pin rotation.
+            A turned pin holds its own rotation and its one-ring neighbours' at the
+            angle, so its neighbourhood turns with it (:func:`pin_neighbourhoods`).
 
         Returns
         -------
@@ -678,12 +655,13 @@ class Deformer:
         >>> res.iterations, len(seen), seen[-1] == res.energy
         (3, 3, True)
         """
-        T = check_targets(self.handles, targets)
+        T = (check_targets(self.handles, targets) if self.dim == 3
+             else planar_targets(self.shape, self.handles, targets))
         tol = self.tol if tol is None else tolerance(tol)
         max_iter = self.max_iter if max_iter is None else iteration_cap(max_iter)
         accelerate = bool(self.accelerate) if accelerate is None else bool(accelerate)
         if accelerate:
-            _refuse_acceleration(method(self.energy))
+            refuse_acceleration(method(self.energy))
         if self.embedded is not None:
             # a start shape becomes node maps fitted to it (EmbeddedDeformation.fit_node_maps)
             return self.embedded.solve(T, init=self._initial_positions(T, init), tol=tol,
@@ -691,6 +669,11 @@ class Deformer:
                                        callback=with_progress(callback, progress))
         self.prepare()
         start = self._initial_positions(T, init)
-        return local_global(self.problem, self.backend, T, start, tol=tol, max_iter=max_iter,
-                            callback=callback, accelerate=accelerate, history=self.history,
-                            progress=progress)
+        loop = dict(tol=tol, max_iter=max_iter, callback=callback, accelerate=accelerate,
+                    history=self.history, progress=progress)
+        if self.dim == 2:
+            return self._plane.solve(self.problem, self.backend, self.handles, T, start,
+                                     angles, **loop)
+        if angles is not None:
+            raise InputError("angles: pin turns are for planar (2D) solves")
+        return local_global(self.problem, self.backend, T, start, **loop)

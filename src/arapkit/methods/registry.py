@@ -11,7 +11,7 @@ Examples
 >>> method("sr-arap").rigidity_map
 False
 >>> [m.name for m in methods("torch")]
-['rring', 'spokes-and-rims']
+['rring', 'spokes-and-rims', 'smooth-arap']
 """
 
 from __future__ import annotations
@@ -84,6 +84,13 @@ class MethodInfo:
     needs_faces : bool
         Defined on triangles: refused on a point cloud or graph (a shape whose domain,
         :func:`arapkit.arap.domains.domain_of`, has no faces), in every door.
+    planar : bool
+        Runs in the plane on a planar shape (2 x 2 rotations, no folded triangles:
+        :mod:`arapkit.methods.planar`); a method without it solves planar shapes in 3D.
+    groups : bool
+        Takes vertex groups (``groups=``): shared-rotation groups and rigid parts
+        (:mod:`arapkit.arap.grouped`): a local/global method with one rotation per vertex
+        and no coupling between rotations.
     handle_tol : float
         How far a handle may end from its target, relative to the bounding-box diagonal:
         0 for hard constraints (eliminated, met to round-off), the soft constraints'
@@ -106,6 +113,8 @@ class MethodInfo:
     volumetric: bool = False
     multires: bool = False
     needs_faces: bool = False
+    planar: bool = False
+    groups: bool = False
     handle_tol: float = 0.0
     options: dict[str, MethodOption] = field(default_factory=dict, hash=False)
     interfaces: frozenset[str] = field(default_factory=lambda: frozenset(INTERFACES))

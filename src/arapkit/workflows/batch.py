@@ -49,6 +49,7 @@ from functools import partial
 from pathlib import Path
 from typing import Any
 
+from ..arap.ringcost import memory_share
 from ..errors import InputError
 
 # the job schema and augmentation live beside this module; their names stay importable here
@@ -139,12 +140,15 @@ def _deform_command(job: dict, output: str) -> list[str]:
     cmd += ["--energy", job["energy"], "--tol", repr(job["tol"]),
             "--max-iter", str(job["max_iter"]), "--init", job["init"]]
     # the method's own options and welding, as given (deform fills in the same defaults)
-    for key, flag in (("sr_alpha", "--sr-alpha"), ("nodes", "--nodes"), ("weld", "--weld"),
+    for key, flag in (("sr_alpha", "--sr-alpha"), ("nodes", "--nodes"),
+                      ("smooth_lambda", "--smooth-lambda"), ("weld", "--weld"),
                       ("neighbours", "--neighbours"), ("radius", "--radius")):
         if job[key] is not None:
             cmd.append(f"{flag}={job[key]}")
     if job["accelerate"] is not None:  # None: the method's choice, as deform's default
         cmd.append("--accelerate" if job["accelerate"] else "--no-accelerate")
+    if job.get("groups") is not None:  # inline groups: the report's vertex_groups
+        cmd += ["--groups", job["groups"] if isinstance(job["groups"], str) else "GROUPS.json"]
     return [*cmd, "-o", output]
 
 
@@ -218,7 +222,9 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
 
     t0 = time.perf_counter()
     worker = _worker_address()
+    sharing = 1  # jobs that run beside this one on its host share its memory
     if isinstance(threads, dict):
+        sharing = max(1, threads.get(_host(worker), 1))
         threads = _threads_for(threads)
     output = Path(outdir) / job["output"]
     try:
@@ -232,7 +238,7 @@ def run_job(job: dict, outdir: str | os.PathLike, threads: int | dict = 1,
         for f in spec.input_files():
             if Path(f).resolve() == output.resolve():
                 raise InputError(f"{output}: output would overwrite an input file")
-        with _limit_threads(threads) as threads:
+        with _limit_threads(threads) as threads, memory_share(sharing):
             prepared = prepare_job(spec)
             res = prepared.solve()
         output.parent.mkdir(parents=True, exist_ok=True)

@@ -30,7 +30,10 @@ __all__ = ["MethodRun", "comparison_figure", "comparison_rows", "format_rows",
            "method_list", "run_comparison", "write_csv"]
 
 #: compare's labels of the methods it runs at r = 1 (others are labelled by their name)
-LABELS = {"rring": "ARAP", "sr-arap": "SR-ARAP"}
+LABELS = {"rring": "ARAP", "sr-arap": "SR-ARAP", "smooth-arap": "Smooth ARAP"}
+#: the method compare also runs at the chosen r and with the rigidity map (the paper's
+#: comparison); every other method with a rigidity map runs at r = 1 only
+RINGS_METHOD = "rring"
 
 CSV_COLUMNS = ("method", "energy_kind", "iterations", "converged", "time_s", "own_energy",
                "folded_edge_fraction", "volume_change", "max_handle_error")
@@ -63,7 +66,7 @@ def method_list(rings: int = 3, rings_map: np.ndarray | None = None,
     Examples
     --------
     >>> [label for label, _ in method_list(4)]
-    ['ARAP', 'SR-ARAP', 'embedded', 'r-ring r=4']
+    ['ARAP', 'SR-ARAP', 'Smooth ARAP', 'embedded', 'r-ring r=4']
     >>> [label for label, _ in method_list(4, volumetric=True)][-1]
     'volumetric ARAP'
     >>> [label for label, _ in method_list(4, has_faces=False)]
@@ -78,9 +81,9 @@ def method_list(rings: int = 3, rings_map: np.ndarray | None = None,
         for m in registered("compare") if m.applies_to(has_faces)
     ]
     if rings != 1:
-        methods.append((f"r-ring r={rings}", {"energy": "rring", "rings": rings}))
+        methods.append((f"r-ring r={rings}", {"energy": RINGS_METHOD, "rings": rings}))
     if rings_map is not None:
-        methods.append(("r-ring mixed r", {"energy": "rring", "rings": rings_map}))
+        methods.append(("r-ring mixed r", {"energy": RINGS_METHOD, "rings": rings_map}))
     if volumetric:
         from ..methods.volumetric import VOLUME_SOLVE_DEFAULTS
 
@@ -108,7 +111,7 @@ def run_comparison(mesh: Mesh | PointCloud, handles, targets, *, rings: int = 3,
     >>> h, t = bar_bend(m, 60)
     >>> runs = run_comparison(m, h, t, rings=2, nodes=20)
     >>> [r.label for r in runs], all(r.folded == 0 for r in runs)
-    (['ARAP', 'SR-ARAP', 'embedded', 'r-ring r=2'], True)
+    (['ARAP', 'SR-ARAP', 'Smooth ARAP', 'embedded', 'r-ring r=2'], True)
     """
     from ..methods.deformer import Deformer, check_domain
     from ..methods.registry import method

@@ -27,6 +27,7 @@ from .. import validate
 from ..arap.domains import all_weight_kinds
 from ..errors import InputError
 from ..methods.deformer import INITS, check_method
+from ..methods.registry import method, methods
 from ..validate import iteration_cap, read_input, ring_size, tolerance
 from .jobs import (
     ENERGIES,
@@ -42,8 +43,8 @@ __all__ = ["JOB_KEYS", "dry_run", "job_hash", "job_spec", "load_jobs", "normalis
 
 #: Keys a job object may have (``mesh``, ``handles`` and ``output`` are required).
 JOB_KEYS = ("mesh", "handles", "transform", "rings", "rings_file", "weights", "energy",
-            "sr_alpha", "nodes", "weld", "tol", "max_iter", "init", "accelerate", "output",
-            "neighbours", "radius")
+            "sr_alpha", "nodes", "smooth_lambda", "weld", "tol", "max_iter", "init",
+            "accelerate", "output", "neighbours", "radius", "groups")
 #: every optional key of :data:`JOB_KEYS` and its default
 _DEFAULTS = {k: JOB_DEFAULTS[k] for k in JOB_KEYS if k in JOB_DEFAULTS}
 
@@ -67,9 +68,14 @@ def _check_method(job: dict, where: str) -> None:
         raise InputError(f"{where}: energy {job['energy']} is not available in this build "
                          f"(available: {', '.join(ENERGIES)})")
     try:
-        check_method(job["energy"], job["sr_alpha"], job["nodes"])
+        check_method(job["energy"], job["sr_alpha"], job["nodes"],
+                     smooth_lambda=job["smooth_lambda"])
     except InputError as e:
         raise InputError(f"{where}: {e}") from None
+    if job.get("groups") is not None and not method(job["energy"]).groups:
+        takes = ", ".join(m.name for m in methods("batch") if m.groups)
+        raise InputError(f"{where}: 'groups': energy {job['energy']} takes no vertex groups "
+                         f"(these methods do: {takes})")
 
 
 def _check_weld(value: Any, where: str) -> float | None:
@@ -169,6 +175,8 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
     for key in ("transform", "rings_file"):
         if job[key] is not None:
             job[key] = _path(job[key], key, base, where)
+    if job["groups"] is not None and not isinstance(job["groups"], (list, dict)):
+        job["groups"] = _path(job["groups"], "groups", base, where)  # inline: as handles
     if "rings" in obj and "rings_file" in obj:
         raise InputError(f"{where}: give 'rings' or 'rings_file', not both")
     # the rules of the library's own parameters (arapkit.validate), with the job's location
@@ -188,13 +196,14 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
         raise InputError(f"{where}: 'accelerate' must be true or false")
     _check_graph(job, where)
     _check_output(job["output"], where, job["mesh"])
-    return {k: job[k] for k in JOB_KEYS}
+    # a job without groups has no "groups" key: its hash (and a resumed run) stays as it was
+    return {k: job[k] for k in JOB_KEYS if k != "groups" or job[k] is not None}
 
 
 def job_spec(job: dict) -> DeformJob:
     """The library's :class:`~arapkit.workflows.jobs.DeformJob` of a checked job (without
     ``output``)."""
-    return DeformJob(**{k: job[k] for k in JOB_KEYS if k != "output"})
+    return DeformJob(**{k: job[k] for k in JOB_KEYS if k != "output" and k in job})
 
 
 def load_jobs(path: str | os.PathLike) -> list[dict]:
@@ -290,4 +299,6 @@ def dry_run(path: str | os.PathLike) -> list[str]:
                      f"vertices), {len(hs.indices)} handle vertices in {len(hs.groups)} "
                      "group(s)")
         lines += [f"  {line}" for line in describe_groups(inputs.mesh.vertices, hs)]
+        if inputs.groups is not None:
+            lines.append(f"  vertex groups: {inputs.groups.summary()}")
     return lines

@@ -50,8 +50,8 @@ def _solver_defaults() -> dict[str, Any]:
     """The :class:`arapkit.Deformer`'s own defaults: a job that leaves a parameter out
     solves as the library does, with no second copy of the values to drift."""
     params = inspect.signature(Deformer.__init__).parameters
-    names = ("rings", "weights", "energy", "sr_alpha", "nodes", "tol", "max_iter", "init",
-             "accelerate")
+    names = ("rings", "weights", "energy", "sr_alpha", "nodes", "smooth_lambda", "tol",
+             "max_iter", "init", "accelerate")
     return {name: params[name].default for name in names}
 
 
@@ -85,8 +85,8 @@ class DeformJob:
         ``cotan-clamped`` on a mesh and ``gaussian`` on a point cloud).
     energy : str
         One of :data:`ENERGIES`.
-    sr_alpha, nodes : optional
-        Options of ``energy="sr-arap"`` and ``energy="embedded"``.
+    sr_alpha, nodes, smooth_lambda : optional
+        Options of ``energy="sr-arap"``, ``energy="embedded"`` and ``energy="smooth-arap"``.
     weld : float or None
         Merge vertices closer than this fraction of the bounding-box diagonal for the solve
         (:func:`arapkit.mesh.welding.weld`); handles, rings and the output refer to the input's
@@ -97,6 +97,9 @@ class DeformJob:
     neighbours, radius : optional
         A point cloud's graph (:class:`arapkit.PointCloud`): k nearest neighbours (default
         10) or every pair closer than ``radius``; refused for a mesh file.
+    groups : str, list, dict or None
+        A groups file (rigid parts and shared-rotation groups, :func:`arapkit.io.load_groups`)
+        or its JSON entries already parsed; None for none.
     """
 
     mesh: str
@@ -112,15 +115,19 @@ class DeformJob:
     energy: str = DEFAULT_ENERGY
     sr_alpha: float | None = _SOLVER["sr_alpha"]
     nodes: int | None = _SOLVER["nodes"]
+    smooth_lambda: float | None = _SOLVER["smooth_lambda"]
     weld: float | None = None
     volumetric: bool = False
     interior_density: float | None = None
     neighbours: int | None = None
     radius: float | None = None
+    groups: str | list | dict | None = None
 
     def input_files(self) -> list[str]:
         """The files this job reads."""
         files = [self.mesh, self.transform, self.rings_file]
+        if isinstance(self.groups, (str, os.PathLike)):
+            files.append(self.groups)
         if isinstance(self.handles, (str, os.PathLike)):
             files.append(self.handles)
             if self.transform is None and os.fspath(self.handles).lower().endswith(".sel"):
@@ -143,6 +150,8 @@ class PreparedJob:
     handles: Any
     deformer: Any
     notes: list[str] = field(default_factory=list)
+    #: the vertex groups solved with (None for none)
+    groups: Any = None
 
     @property
     def rings(self) -> np.ndarray:
@@ -177,6 +186,8 @@ class JobInputs:
     notes: list[str] = field(default_factory=list)
     #: records a further note (e.g. the deformer's) like the loader's
     tell: Callable[[str], None] | None = field(default=None, repr=False)
+    #: the job's vertex groups on ``mesh`` (None for none)
+    groups: Any = None
 
 
 def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -> JobInputs:
@@ -231,7 +242,19 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
             rings = weld_values(mesh, np.asarray(rings))
     else:
         rings = int(job.rings)
-    return JobInputs(source, mesh, hs, rings, notes, tell)
+    return JobInputs(source, mesh, hs, rings, notes, tell, _load_groups(job, source, mesh))
+
+
+def _load_groups(job: DeformJob, source: Any, mesh: Any):
+    """The job's vertex groups on ``mesh`` (None without), read like its handles."""
+    if job.groups is None:
+        return None
+    from ..io import load_groups, parse_groups
+
+    welded = None if mesh is source else mesh
+    if isinstance(job.groups, (str, os.PathLike)):
+        return load_groups(job.groups, source.vertices, welded=welded)
+    return parse_groups(job.groups, source.vertices, source="<groups>", welded=welded)
 
 
 def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> PreparedJob:
@@ -262,11 +285,14 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
         energy=job.energy,
         sr_alpha=job.sr_alpha,
         nodes=job.nodes,
+        smooth_lambda=job.smooth_lambda,
         **({"volumetric": True, "density": job.interior_density} if job.volumetric else {}),
+        **({} if inputs.groups is None else {"groups": inputs.groups}),
     )
     for msg in deformer.notes:
         inputs.tell(msg)
-    return PreparedJob(job, inputs.mesh, inputs.handles, deformer, inputs.notes)
+    return PreparedJob(job, inputs.mesh, inputs.handles, deformer, inputs.notes,
+                       inputs.groups)
 
 
 def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[str]:
@@ -320,7 +346,8 @@ def method_description(job: DeformJob) -> dict[str, Any]:
     """
     from ..methods.deformer import check_method
 
-    options = check_method(job.energy, job.sr_alpha, job.nodes)
+    options = check_method(job.energy, job.sr_alpha, job.nodes,
+                           smooth_lambda=job.smooth_lambda)
     return {"energy": job.energy,
             **{("sr_alpha" if k == "alpha" else k): v for k, v in options.items()}}
 
@@ -376,6 +403,7 @@ def job_report(
                 {"name": g.name, "count": len(g.indices), "kind": g.kind} for g in hs.groups
             ],
         },
+        **_groups_report(job, prepared),
         "result": {
             "iterations": res.iterations,
             "converged": res.converged,
@@ -393,6 +421,22 @@ def job_report(
         "timings": {**res.timings, "wall_s": wall_s},
         "outputs": dict(outputs or {}),
     }
+
+
+def _groups_report(job: DeformJob, prepared: PreparedJob) -> dict[str, Any]:
+    """The report's ``vertex_groups`` section (none without groups): each part or group,
+    its size and kind, and for rigid parts how far their edges moved from their rest length
+    (0 to round-off: the parts are solved exactly)."""
+    g = prepared.groups
+    if g is None:
+        return {}
+    sizes = g.sizes
+    return {"vertex_groups": {
+        "file": job.groups if isinstance(job.groups, str) else "<groups>",
+        "summary": g.summary(),
+        "groups": [{"name": name, "count": int(sizes[i]), "rigid": bool(g.rigid[i])}
+                   for i, name in enumerate(g.names)],
+    }}
 
 
 def describe_groups(vertices: np.ndarray, hs) -> list[str]:

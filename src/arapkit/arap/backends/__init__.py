@@ -66,8 +66,19 @@ def check_device(device: str) -> str:
 
 
 def make_backend(problem: ARAPProblem, device: str = "cpu"):
-    """The backend of ``problem`` on ``device`` (see :func:`check_device`), not yet bound."""
+    """The backend of ``problem`` on ``device`` (see :func:`check_device`), not yet bound.
+
+    A planar problem (``problem.dim == 2``) runs on the planar CPU backend
+    (:mod:`arapkit.arap.backends.planar`).
+    """
     dev = check_device(device)
+    if problem.dim == 2:
+        if dev != "cpu":
+            raise InputError(f"device='{device}': a planar (2D) solve runs on the CPU "
+                             "(device='cpu'); it is small and fast there")
+        from .planar import PlanarBackend
+
+        return PlanarBackend(problem)
     if dev == "cpu":
         return CPUBackend(problem)
     from .torch_backend import TorchBackend

@@ -252,6 +252,8 @@ class CPUBackend:
     """
 
     name = "cpu"
+    #: the positions' columns (the planar backend's are 2)
+    dim = 3
 
     def __init__(self, problem: ARAPProblem) -> None:
         self.problem = problem
@@ -276,6 +278,7 @@ class CPUBackend:
         self.nonneg = bool((problem.w >= 0).all())
         self._make_chunks(nbh, en.n_owners)
         self.slot = _NO_INT
+        self._all: tuple[np.ndarray, np.ndarray] | None = None  # for vertex_rhs
 
     def bind(self, problem: ARAPProblem, elimination=None) -> CPUBackend:
         """Use ``problem`` (same energy, possibly other handles); factorises if needed.
@@ -336,14 +339,36 @@ class CPUBackend:
         # the expanded form, and the user must never be shown one
         return max(E, 0.0) if self.nonneg else E
 
-    def rhs(self, fixed_rhs: np.ndarray, rhs: np.ndarray) -> None:
-        """Right-hand side of the free vertices from the last local step."""
+    def rhs(self, fixed_rhs: np.ndarray, rhs: np.ndarray, slot: np.ndarray | None = None) -> None:
+        """Right-hand side of the free vertices from the last local step.
+
+        ``slot`` (each vertex's row, -1 for a constrained one) replaces the bound problem's
+        split, for a caller that solves a system of its own with the same rotations (the
+        template fit of :mod:`arapkit.methods.fit`, whose matrix adds its data term).
+        """
         gather_rhs(self.buf, self.win_lo, self.win_off, self.chunk_ptr, self.cover_ptr,
-                   self.cover_idx, self.slot, fixed_rhs, rhs)
+                   self.cover_idx, self.slot if slot is None else slot, fixed_rhs, rhs)
+
+    def terms(self) -> tuple[float, float]:
+        """``(sum_k tr(R_k S_k), sum_e D_e |e'|^2)`` of the last local step: the energy is
+        ``quad + rest_term - 2 tr``, and with a global scale s of the rest shape
+        ``quad + s^2 rest_term - 2 s tr``."""
+        tr, quad = self.partial.sum(axis=0)
+        return float(tr), float(quad)
 
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> np.ndarray:
         """Global step: ``A_ff^{-1} rhs``."""
         return self.problem.elimination.solve(rhs, out)
+
+    def vertex_rhs(self, out: np.ndarray) -> np.ndarray:
+        """``b_v = sum_k R_k c_kv`` of every vertex from the last local step, into ``out``
+        (n, 3): rigid parts (:mod:`arapkit.arap.parts`) read their vertices' share."""
+        n = len(out)
+        if self._all is None or len(self._all[0]) != n:
+            self._all = (np.arange(n, dtype=np.int64), np.zeros((n, 3)))
+        gather_rhs(self.buf, self.win_lo, self.win_off, self.chunk_ptr, self.cover_ptr,
+                   self.cover_idx, self._all[0], self._all[1], out)
+        return out
 
     @staticmethod
     def scatter(X: np.ndarray, idx: np.ndarray, P: np.ndarray) -> None:

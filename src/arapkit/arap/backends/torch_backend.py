@@ -512,6 +512,12 @@ class TorchBackend:
         out[:] = (self._b[ts.free] - self._t(fixed_rhs)).cpu().numpy()
 
     @torch.no_grad()
+    def vertex_rhs(self, out: np.ndarray) -> np.ndarray:
+        """``b_v = sum_k R_k c_kv`` of every vertex from the last local step, into ``out``."""
+        out[:] = self._b.cpu().numpy()
+        return out
+
+    @torch.no_grad()
     def solve(self, rhs: np.ndarray, out: np.ndarray) -> np.ndarray:
         """Global step: ``A_ff^{-1} rhs``."""
         out[:] = self.system.solve(self._t(rhs)[None])[0].cpu().numpy()

@@ -7,10 +7,10 @@ Examples
 --------
 >>> from arapkit.arap.energies import energy_names
 >>> energy_names()
-('rring', 'spokes-and-rims', 'sr-arap')
+('rring', 'smooth-arap', 'spokes-and-rims', 'sr-arap')
 """
 
-from . import rring, spokes_rims, sr_arap  # noqa: F401 - each registers its energy
+from . import rring, smooth_arap, spokes_rims, sr_arap  # noqa: F401 - each registers its energy
 from .base import NeighbourhoodEnergy, energy_from_entries, rest_term
 from .rring import rring_energy
 from .table import EnergyInfo, energy_info, energy_names, make_energy, register_energy

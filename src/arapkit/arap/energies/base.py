@@ -69,6 +69,11 @@ class NeighbourhoodEnergy:
     centres : (K - n,) int32 or None
         Where the owners past the vertices have rotations of their own (``nbh``'s rows
         n ... K-1): the vertex each is centred on. None: one rotation per vertex.
+    extra_edges : (m2, 2) int64 or None
+        Vertex pairs past the graph's m edges that the entries use, as edge ids m ...
+        m + m2 - 1 (smooth ARAP's terms couple vertices two rings apart,
+        :mod:`arapkit.arap.energies.smooth_arap`); ``system_w`` then has m + m2 weights.
+        None: the graph's edges only.
     """
 
     name: str
@@ -79,6 +84,7 @@ class NeighbourhoodEnergy:
     coupling: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
     options: dict[str, Any] = field(default_factory=dict)
     centres: np.ndarray | None = None
+    extra_edges: np.ndarray | None = None
 
     @property
     def rings(self) -> np.ndarray:

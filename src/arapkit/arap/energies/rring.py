@@ -39,7 +39,8 @@ import numpy as np
 
 from ...mesh.weights import corner_cotangents
 from ...validate import MAX_RINGS, number
-from ..rings import Neighbourhoods, neighbourhoods_from_arrays
+from ..ringcost import check_ring_memory
+from ..rings import Neighbourhoods, edge_counts, neighbourhoods_from_arrays
 from .base import NeighbourhoodEnergy, owner_rows, rest_term
 from .table import EnergyInfo, register_energy
 
@@ -125,7 +126,8 @@ def _blended(graph: EdgeGraph, w: np.ndarray, nbh: Neighbourhoods, a: np.ndarray
     E = graph.edges
     sizes = np.diff(nbh.edge_ptr)
     entry_w = np.repeat(a, sizes) * w[nbh.edge_idx]
-    disk_coef = nbh.disk_coef * np.repeat(a, np.diff(nbh.disk_ptr))[:, None]
+    disk_coef = nbh.disk_coef  # scaled in place: the fresh structure is this energy's own
+    disk_coef *= np.repeat(a, np.diff(nbh.disk_ptr))[:, None]
     (fe_ptr, fe_idx, fe_w, fd_ptr, fd_idx, fd_coef), lowest = _membrane(graph, w, a)
     edge_idx = np.concatenate([nbh.edge_idx, fe_idx])
     entry_w = np.concatenate([entry_w, fe_w])
@@ -138,7 +140,7 @@ def _blended(graph: EdgeGraph, w: np.ndarray, nbh: Neighbourhoods, a: np.ndarray
         disk_ptr=np.concatenate([nbh.disk_ptr, nbh.disk_ptr[-1] + fd_ptr[1:]]),
         disk_idx=np.concatenate([nbh.disk_idx, fd_idx]),
         disk_coef=np.ascontiguousarray(np.concatenate([disk_coef, fd_coef])),
-        edge_count=np.bincount(edge_idx, minlength=len(E)),
+        edge_count=edge_counts(edge_idx, len(E)),
     )
     centres = lowest.astype(np.int32)
     return NeighbourhoodEnergy("rring", both, entry_w, system_w, rest_term(graph, system_w),
@@ -162,8 +164,13 @@ def rring_energy(graph: EdgeGraph, w: np.ndarray, rings,
     """
     options = {} if ring_scale == 1.0 else {"ring_scale": ring_scale}
     searched, a = ring_blend(rings, ring_scale)
+    # estimated, and refused where it would not fit, before anything is built; a refusal
+    # names the caller's r (not the rings searched here)
+    cost = check_ring_memory(graph.n_vertices, graph.edges, rings, graph.name,
+                             depth_of=lambda r: ring_blend(r, ring_scale)[0],
+                             blended=bool((a < 1.0).any()))
     nbh = neighbourhoods_from_arrays(graph.n_vertices, graph.edges, graph.vertices, w,
-                                     searched)
+                                     searched, cost=cost)
     nbh.rings = np.asarray(rings, dtype=np.int32)
     if (a < 1.0).any():
         return _blended(graph, w, nbh, a, nbh.rings, options)

@@ -29,11 +29,13 @@ import numpy as np
 from ...arap.constraints import check_handles, check_targets
 from ...arap.domains import domain_of
 from ...arap.loop import Result
+from ...arap.ringcost import check_ring_memory
 from ...errors import InputError
 from ...mesh.cloud import PointCloud, as_shape
 from ...mesh.model import Mesh
 from ...validate import ring_sizes
-from ..deformer import MULTIRES_AUTO_VERTICES, Deformer, check_domain, register_variant
+from ..deformer import Deformer
+from ..dispatch import MULTIRES_AUTO_VERTICES, check_domain, register_variant
 from ..registry import method
 from .binding import Binding, full_tree_of, proxy_rings
 from .coarsening import coarsening_of
@@ -161,6 +163,7 @@ class MultiresDeformer:
         self.energy = energy
         self.handles = check_handles(mesh, handles)
         self._rings = ring_sizes(rings, mesh.n_vertices)
+        self._check_ring_memory(self._rings)
         self._weights = weights
         # acceleration is part of the machinery here: on unless asked off
         if options.get("accelerate") is None:
@@ -194,6 +197,15 @@ class MultiresDeformer:
                                 self._region)
         if background:
             self.prepare(background=True)
+
+    def _check_ring_memory(self, rings: np.ndarray) -> None:
+        """Refuse a rigidity map whose full-mesh rings would not fit in memory now: they
+        are built at the exact solve, perhaps in the background, where a refusal would come
+        late (:func:`arapkit.arap.ringcost.check_ring_memory`). One-rings are not
+        estimated: they are the size of the mesh's own edges, and the estimate needs the
+        edge list, which the open of a large mesh does not otherwise wait for."""
+        if method(self.energy).rigidity_map and int(rings.max()) > 1:
+            check_ring_memory(self.mesh.n_vertices, self.mesh.edges, rings, self.mesh.name)
 
     # -- the proxy -------------------------------------------------------------------
     @property
@@ -332,7 +344,9 @@ class MultiresDeformer:
 
     def set_rings(self, rings) -> None:
         """Use a new rigidity map: the proxy's is rebuilt now, the full mesh's lazily."""
-        self._rings = ring_sizes(rings, self.mesh.n_vertices)
+        rings = ring_sizes(rings, self.mesh.n_vertices)
+        self._check_ring_memory(rings)  # before anything changes: a refusal keeps the old map
+        self._rings = rings
         self._fine.pose(self.handles, self._rings, self._region)
         self.stage.set_rings(self._proxy_rings())
 

@@ -27,6 +27,7 @@ from concurrent.futures import Future, ThreadPoolExecutor
 
 import numpy as np
 
+from ...arap.childfactor import child_env
 from ...mesh.model import Mesh
 from ...validate import integer
 from . import decimation_child
@@ -126,7 +127,8 @@ def _run_child(V: np.ndarray, F: np.ndarray,
     np.lib.format.write_array(buf, V, allow_pickle=False)
     np.lib.format.write_array(buf, F, allow_pickle=False)
     done = subprocess.run([sys.executable, _CHILD, str(2 * n_target)],
-                          input=buf.getvalue(), capture_output=True, check=True, timeout=600)
+                          input=buf.getvalue(), capture_output=True, check=True, timeout=600,
+                          env=child_env())
     out = io.BytesIO(done.stdout)
     return tuple(np.lib.format.read_array(out) for _ in range(3))
 

@@ -225,6 +225,7 @@ def volume_rings(rings, surface: Mesh, graph: Mesh, tm: TetMesh) -> np.ndarray:
 def _disks(mesh: Mesh, rings: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(owner k, vertex v) pairs: v is within ``rings[k]`` edges of k."""
     E = mesh.edges
-    nbh = neighbourhoods_from_arrays(mesh.n_vertices, E, mesh.vertices, np.ones(len(E)), rings)
+    nbh = neighbourhoods_from_arrays(mesh.n_vertices, E, mesh.vertices, np.ones(len(E)), rings,
+                                     name=mesh.name)
     owner = np.repeat(np.arange(mesh.n_vertices, dtype=np.int64), np.diff(nbh.disk_ptr))
     return owner, nbh.disk_idx.astype(np.int64)

@@ -1,51 +1,64 @@
-"""PyTorch layer and loss: differentiable r-ring ARAP on CPU or CUDA tensors.
+"""The PyTorch layer: ``X = ARAPLayer(mesh, handles)(targets)``, ARAP solved in torch ops.
 
-Needs the optional extra ``pip install 'arapkit[torch]'``.
-
-* :class:`ARAPLayer`: ``X = layer(targets)`` solves ARAP for handle targets ``(h, 3)`` or a
-  batch ``(B, h, 3)``; a batch is solved together (all ``3B`` right-hand sides in one
-  triangular solve per iteration). Its backward is implicit differentiation at the
-  converged solution, not unrolled iterations (see :class:`_ARAPSolve`).
-* :func:`arap_energy`: eq. 1 of Chen et al. 2017 with optimal rotations, differentiable in
-  the positions: the drop-in "ARAP loss".
-
-What is differentiated: the handle *targets* (the layer) or the positions (the energy).
-Held fixed: the rest shape, the edge weights, the rigidity map r, the handle set and the
-anchors of handle-free components (which stay at rest).
-
-Details and an example: ``docs/torch.md``.
+The forward is the local/global loop of :class:`arapkit.Deformer` on the device; the backward
+is implicit differentiation at the converged solution (see :class:`_ARAPSolve`). Details and
+an example: ``docs/torch.md``.
 """
 
 from __future__ import annotations
 
-import weakref
-
 import torch as _torch
 
-from .arap.backends.torch_backend import (
+from ..arap.backends.torch_backend import (
     TorchSystem,
     _pose_sums,
     best_rotations,
     check_dtype,
     fit_rotations,
 )
-from .arap.problem import ARAPProblem
-from .errors import InputError
-from .mesh.model import bounding_box_diagonal
-from .mesh.weights import DEFAULT_WEIGHTS
-from .validate import iteration_cap, tolerance
+from ..arap.problem import ARAPProblem
+from ..errors import InputError
+from ..mesh.model import bounding_box_diagonal
+from ..validate import iteration_cap, tolerance
 
-__all__ = ["ARAPLayer", "arap_energy"]
+__all__ = ["ARAPLayer"]
 
 
-def _check_targets(T, system: TorchSystem, handles) -> tuple[_torch.Tensor, bool]:
-    """Targets as ``(B, h, 3)`` on the layer's device and dtype; whether a batch was given."""
+def planar_rotations(S: _torch.Tensor) -> _torch.Tensor:
+    """In-plane rotations ``(..., 3, 3)`` (a 2 x 2 turn, z kept) maximising ``tr(R S)``
+    over turns about z: the closed form of :mod:`arapkit.arap.rotations2d`, differentiable
+    by autograd (``(c, s) = (a, b) / |(a, b)|``, ``a = S_00 + S_11``, ``b = S_01 - S_10``).
+
+    Examples
+    --------
+    >>> import torch
+    >>> S = torch.tensor([[[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, 0.0]]])
+    >>> planar_rotations(S)[0, :2, :2].tolist()  # a quarter turn
+    [[0.0, -1.0], [1.0, 0.0]]
+    """
+    a = S[..., 0, 0] + S[..., 1, 1]
+    b = S[..., 0, 1] - S[..., 1, 0]
+    h = _torch.sqrt(a * a + b * b)
+    none = h == 0
+    hs = _torch.where(none, _torch.ones_like(h), h)
+    c = _torch.where(none, _torch.ones_like(a), a / hs)
+    s = _torch.where(none, _torch.zeros_like(b), b / hs)
+    z, o = _torch.zeros_like(c), _torch.ones_like(c)
+    return _torch.stack([_torch.stack([c, -s, z], -1), _torch.stack([s, c, z], -1),
+                         _torch.stack([z, z, o], -1)], -2)
+
+
+def _check_targets(T, system: TorchSystem, handles, dim: int = 3
+                   ) -> tuple[_torch.Tensor, bool]:
+    """Targets as ``(B, h, dim)`` on the layer's device and dtype; whether a batch was
+    given."""
     h = len(handles)
     if not isinstance(T, _torch.Tensor):
         raise InputError(f"targets: expected a torch.Tensor of shape ({h}, 3) or (B, {h}, 3), "
                          f"got {type(T).__name__}")
-    if T.ndim not in (2, 3) or tuple(T.shape[-2:]) != (h, 3) or (T.ndim == 3 and not len(T)):
-        raise InputError(f"targets: expected shape ({h}, 3) or (B, {h}, 3), got "
+    if T.ndim not in (2, 3) or tuple(T.shape[-2:]) != (h, dim) or (T.ndim == 3
+                                                                    and not len(T)):
+        raise InputError(f"targets: expected shape ({h}, {dim}) or (B, {h}, {dim}), got "
                          f"{tuple(T.shape)}")
     if T.dtype != system.dtype:
         raise InputError(f"targets: dtype {T.dtype} does not match the layer's {system.dtype} "
@@ -111,7 +124,7 @@ class _ARAPSolve(_torch.autograd.Function):
             x = x_star.detach().requires_grad_(True)
             Tq = T.detach().requires_grad_(True)
             P = ts.assemble(x, ts.constrained(Tq))
-            b = ts.rhs(fit_rotations(ts.covariances(P)))[:, ts.free]
+            b = ts.rhs(layer.fit(ts.covariances(P)))[:, ts.free]
 
             def hess(u):  # (A - B) u
                 (Bu,) = _torch.autograd.grad(b, x, u, retain_graph=True)
@@ -159,7 +172,7 @@ def _pcg(apply_H, precond, g: _torch.Tensor, tol: float, max_iter: int):
 
 def _check_layer_energy(energy: str) -> None:
     """Refuse, in one line, a method the layer does not offer (the registry's "torch" door)."""
-    from .methods.registry import method, method_names
+    from ..methods.registry import method, method_names
 
     if energy not in method_names():
         known = method_names("library")
@@ -176,16 +189,18 @@ class ARAPLayer(_torch.nn.Module):
 
     Parameters
     ----------
-    mesh : arapkit.Mesh
+    mesh : arapkit.Mesh, or a point cloud (arapkit.PointCloud, Graph, an (n, 3) array)
+        The shape; a point cloud is solved on its neighbourhood graph (``docs/clouds.md``).
     handles : (h,) int
         Handle vertices; ``targets[..., i, :]`` is where ``handles[i]`` goes.
     rings : int or (n,) int
         r per vertex (rigidity), held fixed.
-    weights : str
-        Edge weighting (default :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`).
-    energy : {"rring", "spokes-and-rims"}
+    weights : str, optional
+        Edge weighting (default: the shape's own, :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`
+        on a mesh, ``gaussian`` on a point cloud).
+    energy : {"rring", "spokes-and-rims", "smooth-arap"}
         The local/global energy (SR-ARAP's rotation coupling has no fixed point of one
-        step alone and is not offered here).
+        step alone and is not offered here). Smooth ARAP runs at its default lambda.
     tol, max_iter :
         The forward's stopping test, as for :class:`arapkit.Deformer`. Each pose of a
         batch stops when it passes the test itself, so it gets the answer (and iteration
@@ -197,12 +212,22 @@ class ARAPLayer(_torch.nn.Module):
         the positions and drowns in round-off below ``tol ~ 1e-13``; use ``xtol`` (with
         ``tol=0``) to converge the positions tightly, e.g. for finite-difference checks.
     dtype : torch.float32 or torch.float64
+    dim : {None, 2, 3}
+        2 solves a planar shape (``(n, 2)`` positions, or one z) in its plane: targets and
+        output ``(.., 2)`` for ``(n, 2)`` input, rotations turns about z (no folds through
+        3D); None: 2 for planar input, else 3 (as :class:`arapkit.Deformer`).
     device : "cpu", "cuda" or "cuda:N"
         Where the tensors and the factor live (fixed at construction; ``.to()`` does not
         move them).
     adjoint_tol, adjoint_max_iter :
         Relative residual and iteration cap of the backward's conjugate gradients
         (default 1e-10 in float64, 1e-5 in float32).
+    groups : VertexGroups or (n,) int, optional
+        Rigid parts and shared-rotation groups, as for :class:`arapkit.Deformer` (a plain
+        array is libigl's ``G``). Shared-rotation groups run on any device; with rigid
+        parts each pose is solved exactly by the CPU engine (float64, ``device="cpu"``) and
+        differentiated implicitly with the parts' rotations among the unknowns
+        (:mod:`arapkit.arap.backends.torch_parts`).
 
     Examples
     --------
@@ -220,17 +245,41 @@ class ARAPLayer(_torch.nn.Module):
     True
     """
 
-    def __init__(self, mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS,
+    def __init__(self, mesh, handles, rings=1, weights: str | None = None,
                  energy: str = "rring", tol: float = 1e-3, max_iter: int = 1000,
                  dtype=_torch.float32, device="cpu", *, xtol: float | None = None,
-                 adjoint_tol: float | None = None,
-                 adjoint_max_iter: int = 1000) -> None:
+                 adjoint_tol: float | None = None, adjoint_max_iter: int = 1000,
+                 dim: int | None = None, groups=None) -> None:
         super().__init__()
         check_dtype(dtype)
         _check_layer_energy(energy)
-        problem = ARAPProblem.from_mesh(mesh, handles, energy, weights, rings=rings)
+        from ..mesh.planar import PlanarInput
+        from ..methods.dispatch import check_domain
+        from ..methods.planar import solve_dim
+        from ..methods.registry import method
+
+        shape = PlanarInput.of_shape(mesh)  # a point cloud too, on its graph
+        check_domain(shape.mesh, energy)  # a method on triangles refuses a cloud
+        #: solved in the plane (turns about z only); ``given_dim``: the caller's columns
+        self.planar = solve_dim(shape, dim, method(energy).planar, energy) == 2
+        self.given_dim = shape.given_dim
+        self._z = shape.z
+        self.fit = planar_rotations if self.planar else fit_rotations
+        problem = ARAPProblem.from_mesh(shape.mesh, handles, energy, weights, rings=rings)
+        self._parts = None
+        if groups is not None:
+            if self.planar:  # a part's fit is a 3 x 3 rotation
+                raise InputError("groups: vertex groups are solved in 3D; a planar layer "
+                                 "takes none (pass dim=3 to solve the shape in 3D)")
+            problem = _with_groups(problem, energy, groups, device)
+            if getattr(problem, "layout", None) is not None:
+                from ..arap.backends.torch_parts import PartsAdjoint
+
+                self._parts = PartsAdjoint(problem)
         self.problem = problem
-        self.system = TorchSystem(problem, device, dtype).bind(problem)
+        self.system = TorchSystem(problem, device, dtype)
+        if self._parts is None:  # the parts' merged system is the CPU engine's
+            self.system.bind(problem)
         self.tol = tolerance(tol)
         self.max_iter = iteration_cap(max_iter)
         V = problem.vertices
@@ -257,11 +306,19 @@ class ARAPLayer(_torch.nn.Module):
 
     def forward(self, targets: _torch.Tensor) -> _torch.Tensor:
         """Deformed vertices ``(n, 3)`` or ``(B, n, 3)`` for targets ``(h, 3)`` or ``(B, h, 3)``."""
-        T, batched = _check_targets(targets, self.system, self.handles)
+        T, batched = _check_targets(targets, self.system, self.handles, self.given_dim)
+        if self.given_dim == 2:  # onto the plane z = 0 the problem was built on
+            T = _torch.cat([T, T.new_zeros(T.shape[:-1] + (1,))], dim=-1)
+        elif self.planar and bool((T[..., 2] != self._z).any()):
+            raise InputError(f"targets: a planar layer keeps z = {self._z:g} (the plane); "
+                             "use dim=3 to deform the shape out of its plane")
         # the problem lives in units of problem.scale (a power of two: exact); autograd sees
         # the two scalings as ordinary operations
         s = self.problem.scale
-        X = _ARAPSolve.apply(T / s, self) * s
+        solve = _ARAPSolve if self._parts is None else _PartsSolve
+        X = solve.apply(T / s, self) * s
+        if self.given_dim == 2:
+            X = X[..., :2]
         return X if batched else X[0]
 
     def _iterate(self, T: _torch.Tensor) -> tuple[_torch.Tensor, dict]:
@@ -285,7 +342,7 @@ class ARAPLayer(_torch.nn.Module):
             x, x_prev = ts.solve(rhs), x
             P = ts.assemble(x, C)
             S = ts.covariances(P)
-            R = best_rotations(S)
+            R = best_rotations(S) if not self.planar else planar_rotations(S)
             E = ts.energy_expanded(P, R, S)
             passed = self._passed(E, E_prev, x - x_prev, it, floor)
             done = passed | (it == self.max_iter)
@@ -314,6 +371,73 @@ class ARAPLayer(_torch.nn.Module):
         return passed
 
 
+def _with_groups(problem: ARAPProblem, energy: str, groups, device):
+    """``problem`` with the layer's groups (refused where the method or device cannot)."""
+    from ..arap.grouped import as_groups, with_groups
+    from ..methods.registry import method, method_names
+
+    if not method(energy).groups:
+        takes = ", ".join(m for m in method_names("torch") if method(m).groups)
+        raise InputError(f"groups: energy '{energy}' takes no vertex groups (these methods "
+                         f"do: {takes})")
+    g = as_groups(groups, problem.n_vertices)
+    if g.rigid.any() and str(device) != "cpu":
+        raise InputError(f"{g.source}: rigid parts in ARAPLayer solve on device='cpu' (the "
+                         "exact parts run on the CPU engine)")
+    return with_groups(problem, g)
+
+
+class _PartsSolve(_torch.autograd.Function):
+    """A layer with rigid parts: each pose solved by the CPU engine of
+    :mod:`arapkit.arap.grouped`, the backward by
+    :class:`~arapkit.arap.backends.torch_parts.PartsAdjoint` (in the problem's units)."""
+
+    @staticmethod
+    def forward(ctx, T, layer: ARAPLayer):
+        import numpy as np
+
+        from ..arap.backends.cpu import CPUBackend
+        from ..arap.grouped import GroupedBackend
+        from ..arap.loop import local_global
+
+        p = layer.problem
+        s = p.scale
+        if getattr(layer, "_backend", None) is None:
+            layer._backend = GroupedBackend(CPUBackend(p), p).bind(p)
+        be = layer._backend
+        free = p.elimination.free
+        out, ys, Rs, info = [], [], [], {"iterations": 0, "converged": True, "energy": []}
+        for Tb in T.detach().to(_torch.float64).cpu().numpy():
+            res = local_global(p, be, Tb * s, None, tol=layer.tol, max_iter=layer.max_iter)
+            V = res.vertices / s
+            out.append(V)
+            ys.append(V[p.perm][free])
+            Rs.append(be.R_cur.copy())
+            info["iterations"] = max(info["iterations"], res.iterations)
+            info["converged"] &= bool(res.converged)
+            info["energy"].append(res.energy)
+        info["energy"] = _torch.tensor(info["energy"])
+        layer.last_info = info
+        ctx.layer, ctx.ys, ctx.Rs = layer, ys, Rs
+        ctx.save_for_backward(T)
+        return _torch.as_tensor(np.stack(out), dtype=T.dtype, device=T.device)
+
+    @staticmethod
+    def backward(ctx, gX):
+        layer = ctx.layer
+        (T,) = ctx.saved_tensors
+        perm = _torch.as_tensor(layer.problem.perm)
+        adj = layer._parts
+        gT, its = [], 0
+        for b in range(T.shape[0]):
+            g, k = adj.vjp(ctx.ys[b], ctx.Rs[b], T[b], gX[b].to(_torch.float64)[perm],
+                           layer.adjoint_tol, layer.adjoint_max_iter)
+            gT.append(g)
+            its = max(its, k)
+        layer.last_info["adjoint_iterations"] = its
+        return _torch.stack(gT).to(T.dtype), None
+
+
 class _Frozen:
     """The forward's answer per pose, filled in as each pose stops."""
 
@@ -332,79 +456,3 @@ class _Frozen:
         cpu = poses.cpu()
         self.iterations[cpu] = it
         self.converged[cpu] = passed.cpu()
-
-
-_SYSTEMS: weakref.WeakKeyDictionary = weakref.WeakKeyDictionary()
-
-
-def _system_for(problem: ARAPProblem, like: _torch.Tensor) -> TorchSystem:
-    """A cached energy-only :class:`TorchSystem` of ``problem`` on ``like``'s device/dtype."""
-    per = _SYSTEMS.setdefault(problem, {})
-    key = (str(like.device), like.dtype)
-    if key not in per:
-        per[key] = TorchSystem(problem, like.device, check_dtype(like.dtype))
-    return per[key]
-
-
-def arap_energy(X: _torch.Tensor, layer_or_problem: ARAPLayer | ARAPProblem) -> _torch.Tensor:
-    """ARAP energy (eq. 1) of positions ``X`` with optimal rotations: the "ARAP loss".
-
-    ``sum_k sum_{e in N(k)} w_ke |e'_e - R_k e_e|^2`` with each ``R_k`` the best fit to X,
-    summed edge by edge. With non-negative weights (the default) it is >= 0 and 0 exactly
-    at rigid motions of the rest shape. Its gradient is ``dE/dX`` at the optimal rotations
-    (envelope theorem: the rotations' own derivative multiplies ``dE/dR = 0``), so the
-    rotations are detached; second derivatives are therefore not those of the reduced
-    energy.
-
-    Parameters
-    ----------
-    X : (n, 3) or (B, n, 3) tensor
-        Positions in the mesh's vertex order (float32 or float64, any device).
-    layer_or_problem : ARAPLayer or arapkit.arap.problem.ARAPProblem
-        Gives the rest shape, weights, neighbourhoods (r) and energy; handles play no role.
-
-    Returns
-    -------
-    tensor of shape () or (B,)
-
-    Examples
-    --------
-    >>> import torch
-    >>> from arapkit.mesh.shapes import bar
-    >>> from arapkit.arap.problem import ARAPProblem
-    >>> mesh = bar(segments=(10, 2, 2))
-    >>> p = ARAPProblem.from_mesh(mesh, [0], rings=2)
-    >>> X = torch.tensor(mesh.vertices, requires_grad=True)
-    >>> arap_energy(X, p).item() < 1e-20
-    True
-    >>> E = arap_energy(X * 1.1, p)
-    >>> E.backward()
-    >>> bool(E > 0) and X.grad.shape == X.shape
-    True
-    """
-    if isinstance(layer_or_problem, ARAPLayer):
-        problem = layer_or_problem.problem
-    elif isinstance(layer_or_problem, ARAPProblem):
-        problem = layer_or_problem
-    else:
-        raise InputError("arap_energy: second argument must be an ARAPLayer or an ARAPProblem, "
-                         f"got {type(layer_or_problem).__name__}")
-    if problem.energy.coupling is not None:
-        raise InputError(f"arap_energy: energy '{problem.energy.name}' couples rotations and "
-                         "has no closed-form optimal rotations; use 'rring' or "
-                         "'spokes-and-rims'")
-    n = problem.n_vertices
-    if not isinstance(X, _torch.Tensor) or X.ndim not in (2, 3) or tuple(X.shape[-2:]) != (n, 3):
-        shape = tuple(X.shape) if isinstance(X, _torch.Tensor) else type(X).__name__
-        raise InputError(f"arap_energy: expected positions of shape ({n}, 3) or (B, {n}, 3), "
-                         f"got {shape}")
-    if X.dtype not in (_torch.float32, _torch.float64):
-        raise InputError(f"arap_energy: dtype {X.dtype} is not supported "
-                         "(use torch.float32 or torch.float64)")
-    ts = _system_for(problem, X)
-    s = problem.scale  # the problem's unit (a power of two): exact
-    P = (X if X.ndim == 3 else X[None])[:, ts.perm] / s
-    with _torch.no_grad():
-        R = best_rotations(ts.covariances(P))
-    E = ts.energy(P, R) * (s * s)
-    return E if X.ndim == 3 else E[0]
