@@ -18,10 +18,13 @@ The scene: examples/bar.off's shape (``arapkit.mesh.shapes.bar``, 7 m x 0.4 m x 
 4. **The stopping tolerance.** The same 1 s at 60 steps a second for ``tol`` 1e-4 ...
    1e-7, each against a reference solved to ``tol`` 1e-12: the largest deviation over
    the frames (fraction of the diagonal) and the iterations per step.
+5. **Rigid parts.** The cost per frame of the same 1 s with a rigid bone (the middle 2 m
+   of the bar) and with a shared-rotation group there, against the plain bar, interleaved
+   ``--repeats`` times (min wall time), with the iterations per step.
 
 Usage::
 
-    python benchmarks/bench_dynamics.py [--repeats 3]
+    python benchmarks/bench_dynamics.py [--repeats 3] [--only parts]
 """
 
 from __future__ import annotations
@@ -142,15 +145,48 @@ def tolerance_study() -> None:
               f"{100 * err:.3f} % of the diagonal |")
 
 
+def parts_cost(repeats: int) -> None:
+    from arapkit.mesh.groups import VertexGroups
+    from arapkit.methods.dynamics import simulate
+
+    m, left, g = scene()
+    bone = np.flatnonzero(np.abs(m.vertices[:, 0] - 3.5) < 1.0)
+    runs = {
+        "plain": None,
+        f"rigid bone ({len(bone)} vertices)": VertexGroups.from_lists(
+            [("bone", bone, True)], m.n_vertices),
+        "shared-rotation group (same vertices)": VertexGroups.from_lists(
+            [("bone", bone, False)], m.n_vertices),
+    }
+    best = dict.fromkeys(runs, np.inf)
+    its = {}
+    for groups in runs.values():  # compiled and cached before the clock runs
+        simulate(m, 3, dt=1 / 60, handles=left, gravity=g, groups=groups)
+    for _ in range(repeats):
+        for name, groups in runs.items():
+            t0 = time.perf_counter()
+            tr = simulate(m, 61, dt=1 / 60, handles=left, gravity=g, groups=groups)
+            best[name] = min(best[name], time.perf_counter() - t0)
+            its[name] = (tr.iterations.mean(), tr.iterations.max())
+    print("| run | ms per frame | iterations per step (mean, max) | x plain |")
+    print("|---|---|---|---|")
+    for name in runs:
+        print(f"| {name} | {1e3 * best[name] / 60:.1f} | {its[name][0]:.1f}, {its[name][1]} | "
+              f"{best[name] / best['plain']:.2f} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--only", choices=("parts",), help="run only this study")
     args = ap.parse_args()
     print(f"load average at start: {os.getloadavg()[0]:.2f}")
-    h_independence()
-    agreement()
-    acceleration(args.repeats)
-    tolerance_study()
+    if args.only is None:
+        h_independence()
+        agreement()
+        acceleration(args.repeats)
+        tolerance_study()
+    parts_cost(args.repeats)
     print(f"load average at end: {os.getloadavg()[0]:.2f}")
 
 

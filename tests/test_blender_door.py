@@ -147,6 +147,38 @@ def test_the_exact_solve_is_the_librarys_solve():
     assert np.abs(shape.vertices - mesh.vertices).max() > 0.1 * diag
 
 
+class _Recording(LiveDeformer):
+    """A LiveDeformer that keeps every shape it sends (poll() keeps only the newest)."""
+
+    def __init__(self, *args, **kwargs):
+        self.shapes = []
+        super().__init__(*args, **kwargs)
+
+    def _publish(self, shape):
+        self.shapes.append(shape)
+        super()._publish(shape)
+
+
+def test_a_pose_after_a_quiet_frame_shows_after_its_first_iteration():
+    """The frame is counted from the last shape sent: a new pose that comes after a quiet
+    frame is shown after one iteration, not after a whole frame of iterations."""
+    mesh, h, t, r = _case()
+    live = _Recording(mesh, h, r, frame_ms=200.0, tol=1e-9, max_iter=400)
+    try:
+        live.request(t, exact=True)
+        live.wait(300)
+        time.sleep(0.25)  # more than a frame since the exact shape was sent
+        _, t_end = bar_bend(mesh, 110)
+        live.request(t_end)
+        live.wait(300)
+    finally:
+        live.close()
+    first_live = next(s for s in live.shapes if not s.exact)
+    assert first_live.iterations == 1 and not first_live.converged
+    # and later shapes wait a frame from it: the solve ran on to convergence
+    assert live.shapes[-1].converged and live.shapes[-1].iterations > 1
+
+
 def test_a_drag_sends_live_shapes_and_converges_warm_started():
     """A drag: live shapes while it moves, then the last pose solved on to convergence from
     the last shape (the stopping test's distance from the exact solve, not a restart)."""

@@ -425,8 +425,16 @@ def test_browser_paint_a_part_and_drag(tmp_path):
                 return box["x"] + uv[0, 0] * box["width"], box["y"] + uv[0, 1] * box["height"]
 
             x, y = screen([3.0, -0.2, 0.0])  # the bar's front face
-            page.mouse.click(x, y)
-            wait_for(lambda: (st.groups.ids >= 0).any(), 30, "the click to paint")
+            # the tool's click listener reaches the page a moment after the tool is chosen
+            # (a click before it is not a paint stroke): click again as a user would
+            for _ in range(6):
+                page.mouse.click(x, y)
+                try:
+                    wait_for(lambda: (st.groups.ids >= 0).any(), 5, "the click to paint")
+                    break
+                except AssertionError:
+                    continue
+            wait_for(lambda: (st.groups.ids >= 0).any(), 5, "the click to paint")
             clicked = int((st.groups.ids >= 0).sum())
             x2, y2 = screen([4.5, -0.2, 0.0])
             page.keyboard.down("Shift")

@@ -192,3 +192,67 @@ def test_browser_toggle_gives_secondary_motion(tmp_path):
         assert np.abs(app.served_vertices() - st.vertices).max() < 1e-5
     finally:
         app.stop()
+
+
+def test_browser_secondary_motion_keeps_a_painted_part_rigid(tmp_path):
+    """In Chromium: a rigid part painted in the bar's middle (the *Groups* panel's state),
+    *Secondary motion* ticked, the free end dragged: every shape the body sends keeps the
+    part's edge lengths (the painted groups reach the body as they reach the static
+    solve)."""
+    sync_playwright = _chromium_or_skip()
+    app = bar_app(tmp_path / "out")
+    try:
+        assert app.wait_idle(120)
+        st = app.state
+        with app.lock:
+            g = st.new_group(rigid=True)
+            st.paint_group(st.vertices[int(np.argmin(np.abs(st.vertices[:, 0] - 3.5)))],
+                           0.6, g)
+        part = np.flatnonzero(st.groups.ids == g)
+        assert len(part) > 20
+        E = st.mesh.edges[np.isin(st.mesh.edges, part).all(axis=1)]
+        rest = np.linalg.norm(st.vertices[E[:, 0]] - st.vertices[E[:, 1]], axis=1)
+        tip = st.handle("free end")
+        with page_on(sync_playwright, app) as (page, client):
+            box = page.get_by_label("Secondary motion")
+            box.scroll_into_view_if_needed()
+            box.check()
+            wait_for(lambda: st.settings.dynamics, 30, "the checkbox to reach the server")
+            assert app.wait_idle(60)
+            seen = []
+            app.sent_hooks.append(lambda u, sent: seen.append(u))
+            gz = tip.position.copy()
+            eye = gz + np.array([0.0, -4.0, 1.0])
+            client.camera.position = tuple(eye)
+            client.camera.look_at = tuple(gz)
+            wait_for(lambda: np.allclose(client.camera.look_at, gz, atol=1e-3)
+                     and np.allclose(client.camera.position, eye, atol=1e-3), 30,
+                     "the camera to move")
+            canvas = page.locator("canvas").first
+            cbox = canvas.bounding_box()
+            cam = client.camera
+            view = CameraView(np.asarray(cam.position), np.asarray(cam.wxyz),
+                              float(cam.fov), float(cam.aspect))
+            arrow = gz + 0.85 * app.gizmo_scale(tip) * np.array([0.0, 0.0, 1.0])
+            uv, _ = view.project(arrow[None])
+            x = cbox["x"] + uv[0, 0] * cbox["width"]
+            y = cbox["y"] + uv[0, 1] * cbox["height"]
+            page.mouse.move(x, y)
+            page.mouse.down()
+            for k in range(1, 11):
+                page.mouse.move(x, y - 20 * k)
+                time.sleep(0.03)
+            page.mouse.up()
+            wait_for(lambda: st.handle("free end").position[2] > gz[2] + 0.1, 30,
+                     "the gizmo drag to reach the server")
+            assert app.wait_idle(120)
+        shapes = [u.vertices for u in seen if u.vertices is not None and u.error is None]
+        assert len(shapes) >= 8 and seen[-1].final
+        assert "secondary motion" in seen[-1].notes[0]
+        moved = np.abs(shapes[-1][part] - st.mesh.vertices[part]).max()
+        assert moved > 1e-3  # the part moved with the body
+        for V in shapes:
+            L = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+            assert np.abs(L - rest).max() < 1e-9
+    finally:
+        app.stop()

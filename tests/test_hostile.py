@@ -265,7 +265,7 @@ def test_bad_option_values_one_line(capsys, files, args, fragment):
     (["--port", "-1"], "--port: must be at least 1"),
     (["--max-upload-mb", "nan"], "--max-upload-mb: expected a finite number, got 'nan'"),
     (["--max-upload-mb", "0"], "--max-upload-mb: must be in (0, 1.04858e+06]"),
-    (["--rings", "1000000"], "--rings: must be at most 100"),
+    (["--rings", "1000000"], "--rings/-r: must be at most 100"),
 ])
 def test_edit_options_refused_before_starting(capsys, tmp_path, args, fragment, monkeypatch):
     import arapkit.editor.app as app_mod

@@ -158,7 +158,7 @@ def test_core_dependencies_carry_no_gui_or_plotting_stack():
     project = _pyproject()
     core = _names(project["dependencies"])
     assert core == {"numpy", "scipy", "numba", "cholespy", "trimesh", "tqdm",
-                    "fast-simplification"}
+                    "fast-simplification", "qdldl"}
     extras = project["optional-dependencies"]
     assert "matplotlib" in _names(extras["plots"])
     assert {"viser", "matplotlib"} <= _names(extras["editor"])

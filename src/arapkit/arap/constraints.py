@@ -524,8 +524,11 @@ class Elimination:
 
     @classmethod
     def from_edges(cls, n: int, edges: np.ndarray, weights: np.ndarray, constrained,
-                   what: str, remedy: str = "") -> Elimination:
-        """Eliminate from the graph Laplacian ``sum_e w_e (e_i - e_j)(e_i - e_j)^T``.
+                   what: str, remedy: str = "", diag: np.ndarray | None = None
+                   ) -> Elimination:
+        """Eliminate from the graph Laplacian ``sum_e w_e (e_i - e_j)(e_i - e_j)^T``, plus
+        ``diag`` (n,) on its diagonal where given (a mass term: it couples no two vertices,
+        so only the free rows' entries matter).
 
         The reduced blocks are assembled straight from the edge list (no full n x n matrix).
         """
@@ -536,8 +539,11 @@ class Elimination:
         sa, sb = slot[a], slot[b]
         nf, nc = len(free), len(cons)
         ff = (sa >= 0) & (sb >= 0)
-        diag = (np.bincount(sa[sa >= 0], w[sa >= 0], nf)
+        d_ff = (np.bincount(sa[sa >= 0], w[sa >= 0], nf)
                 + np.bincount(sb[sb >= 0], w[sb >= 0], nf))
+        if diag is not None:
+            # (without edges, bincount's sum is an int array)
+            d_ff = d_ff + np.asarray(diag, dtype=np.float64)[free]
         fc = (sa >= 0) & (sb < 0)
         cf = (sa < 0) & (sb >= 0)
         A_fc = sp.csr_matrix(
@@ -548,7 +554,7 @@ class Elimination:
         factor = None
         if nf:
             A = sp.coo_matrix(
-                (np.concatenate([-w[ff], -w[ff], diag]),
+                (np.concatenate([-w[ff], -w[ff], d_ff]),
                  (np.concatenate([sa[ff], sb[ff], np.arange(nf)]),
                   np.concatenate([sb[ff], sa[ff], np.arange(nf)]))),
                 shape=(nf, nf),

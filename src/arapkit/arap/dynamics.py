@@ -28,6 +28,17 @@ sparsity; it is factorised once per step length, stiffness, damping and handle s
 step minimises Phi exactly over its block of unknowns, so Phi never rises within a time
 step; the step ends by the project's relative energy test on Phi (:mod:`arapkit.arap.loop`).
 
+Vertex groups (a :class:`~arapkit.arap.grouped.GroupedProblem`) change the blocks, not the
+objective's form. A shared-rotation group fits one rotation to its members' neighbourhoods
+in the local step (the inertial term does not depend on R). A rigid part's vertices are
+``x_v = R_P a_v + t_P``: the global step solves for ``t_P`` with the part merged into one row,
+exactly as the static solver (:mod:`arapkit.arap.parts`), the merged row's inertia being the
+part's mass (``b M`` enters the reduced system as a diagonal, and ``b M y`` its right-hand
+side); the local step fits ``R_P`` to the whole objective, turning a free part about its
+centre of mass, so each iteration keeps the step's linear momentum. The part fit also turns
+the energy's rotations of the neighbourhoods inside the part (:mod:`arapkit.arap.parts`),
+and Anderson acceleration extrapolates the parts' rotations with the positions.
+
 Components without a handle are not held here (their mass keeps the system positive
 definite: a free body falls); a vertex without mass (one no triangle uses) has no motion of
 its own and stays where it is.
@@ -50,7 +61,9 @@ from .accel import Anderson
 from .backends import make_backend
 from .constraints import Elimination, return_free_memory
 from .energies import energy_info
+from .grouped import GroupedBackend, GroupedProblem
 from .loop import energy_floor
+from .parts import PartSystem, nearest_rotations
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -142,7 +155,9 @@ class ImplicitEuler:
     ----------
     problem : ARAPProblem
         The energy, and the handles unless ``handles`` is given (its anchoring of
-        components without handles is not used: their masses hold them).
+        components without handles is not used: their masses hold them). A
+        :class:`~arapkit.arap.grouped.GroupedProblem` brings its shared-rotation groups
+        and rigid parts (see the module).
     masses : (n,) float
         Lumped vertex masses (kg), caller numbering; 0 only for vertices without triangles.
     stiffness : float
@@ -212,32 +227,55 @@ class ImplicitEuler:
             handles = handle_indices(handles, n, problem.name)
         #: the handle vertices (caller numbering)
         self.handles = np.asarray(handles, dtype=np.int64)
-        self.held = np.setdiff1d(massless, self.handles).astype(np.int64)
+        layout = problem.layout if isinstance(problem, GroupedProblem) else None
+        held = np.setdiff1d(massless, self.handles).astype(np.int64)
+        if layout is not None:  # a part's massless vertices move with it
+            held = held[layout.part[problem.iperm[held]] < 0]
+            mass = np.bincount(layout.vert_part, m[problem.perm][layout.verts],
+                               layout.n_parts)
+            if (mass <= 0).any():
+                raise InputError(f"{problem.groups.source}: rigid part "
+                                 f"{layout.names[int(np.argmax(mass <= 0))]!r} has no mass "
+                                 "(its vertices are in no triangle)")
+        self.held = held
         #: handles first, then the held massless vertices (caller numbering)
         self.constrained = np.concatenate([self.handles, self.held])
         self.m_int = m[problem.perm]
+        #: the rigid parts' reduced system (None without rigid parts)
+        self.parts: PartSystem | None = None
         self.elimination = self._factorise()
         self.free = self.elimination.free
-        self.backend = make_backend(problem, "cpu").bind(problem, self.elimination)
+        inner = make_backend(problem, "cpu")
+        # the energy alone (best rotations, no part moved): the elastic energy's
+        self.energy_backend = inner.bind(problem, self.elimination)
+        self.backend = inner if not isinstance(problem, GroupedProblem) else GroupedBackend(
+            inner, problem).bind(problem, self.elimination, self.parts)
         self.m_free = self.m_int[self.free]
         self.timings = {"factorisation_ms": 1e3 * (time.perf_counter() - t0)}
 
     def _factorise(self) -> Elimination:
         """``L_D + b M`` with the constrained vertices eliminated (the one place that
-        assembles the global matrix: a reduced basis, e.g. rigid parts, goes here)."""
+        assembles the global matrix); with rigid parts, the parts' merged system
+        (:class:`~arapkit.arap.parts.PartSystem`) with ``b M`` as its diagonal."""
         p = self.problem
         n = p.n_vertices
         E, w = p.edges, p.energy.system_w
-        a, b = E[:, 0], E[:, 1]
-        diag = (np.bincount(a, w, n) + np.bincount(b, w, n)) + self.beta * self.m_int
-        A = sp.coo_matrix((np.concatenate([-w, -w, diag]),
-                           (np.concatenate([a, b, np.arange(n)]),
-                            np.concatenate([b, a, np.arange(n)]))), shape=(n, n)).tocsr()
         remedy = (
             Advice(" for this step length (obtuse triangles give negative cotangent "
                    "weights); use {weights} or a smaller dt", weights=SOUND_WEIGHTS)
             if (p.w < 0).any() else ""
         )
+        if isinstance(p, GroupedProblem) and p.layout is not None:
+            self.parts = PartSystem.build(p.layout, p.graph, w, p.iperm[self.constrained],
+                                          p.name, remedy, diag=self.beta * self.m_int,
+                                          nbh=p.energy.nbh)
+            return_free_memory()
+            return self.parts.elimination
+        a, b = E[:, 0], E[:, 1]
+        diag = (np.bincount(a, w, n) + np.bincount(b, w, n)) + self.beta * self.m_int
+        A = sp.coo_matrix((np.concatenate([-w, -w, diag]),
+                           (np.concatenate([a, b, np.arange(n)]),
+                            np.concatenate([b, a, np.arange(n)]))), shape=(n, n)).tocsr()
         el = Elimination.from_matrix(A, p.iperm[self.constrained], p.name, remedy)
         return_free_memory()
         return el
@@ -296,26 +334,49 @@ class ImplicitEuler:
         Y = y[perm] / s
         C = np.concatenate([np.asarray(targets, dtype=np.float64) / s, x[self.held] / s])
         beta = self.beta
-        my = beta * self.m_free[:, None] * Y[free]
-        fixed_rhs = np.ascontiguousarray((el.A_fc @ C) - my) if len(free) else np.zeros((0, 3))
+        m_int = self.m_int[:, None]
+        if self.parts is not None:
+            # the parts' system reads every vertex's right-hand side, b M y included, and
+            # places the held parts by their handles
+            be.extra_rhs = beta * m_int * Y
+            known = np.zeros((p.n_vertices, 3))
+            known[inv[self.constrained]] = C
+            C = self.parts.constrained_positions(p.vertices, known, p.diagonal,
+                                                 p.groups.source)
+            fixed_rhs = np.zeros((len(free), 3))
+        else:
+            my = beta * self.m_free[:, None] * Y[free]
+            fixed_rhs = (np.ascontiguousarray((el.A_fc @ C) - my) if len(free)
+                         else np.zeros((0, 3)))
         P = (Y if start == "inertial" else x[perm] / s).copy()
         P[cons] = C
         R = np.empty((p.energy.n_owners, 3, 3))
-        m_int = self.m_int[:, None]
+
+        def inertia() -> float:
+            with np.errstate(over="ignore", invalid="ignore"):  # refused as non-finite below
+                return beta * float(np.sum(m_int * (P - Y) ** 2))
 
         def objective() -> float:
-            E = be.local(P, R)
-            with np.errstate(over="ignore", invalid="ignore"):  # refused as non-finite below
-                return E + beta * float(np.sum(m_int * (P - Y) ** 2))
+            # the inertia before the local step: a rigid part's fit moves P, and the change
+            # it reports is the whole objective's
+            kin = inertia()
+            return be.local(P, R) + kin
 
         phi_prev = objective()
         floor = energy_floor(be.rest_term)
         nf = len(free)
+        # with rigid parts the iterate also holds the rotations they are placed with (three
+        # rows of three each): extrapolating the positions alone would place the parts
+        # with stale rotations, and the safeguard would refuse nearly every extrapolation
+        nr = 3 * self.parts.layout.n_parts if self.parts is not None else 0
         rhs = np.empty((nf, 3))
-        g = np.empty((nf, 3))
-        aa = Anderson(3 * nf, history) if accelerate and nf else None
-        x_it = np.ascontiguousarray(P[free])  # the current iterate (free vertices)
-        x_aa = np.empty((nf, 3))
+        g = np.empty((nf + nr, 3))
+        aa = Anderson(3 * (nf + nr), history) if accelerate and nf else None
+        x_it = np.empty((nf + nr, 3))  # the current iterate
+        x_it[:nf] = P[free]
+        if nr:
+            x_it[nf:] = be.R_cur.reshape(-1, 3)
+        x_aa = np.empty((nf + nr, 3))
         hist: list[float] = []
         converged = plain_next = False
         it = 0
@@ -324,10 +385,17 @@ class ImplicitEuler:
             accepted = False
             if nf:
                 be.rhs(fixed_rhs, rhs)
-                el.solve(rhs, g)  # g = G(x): one local/global step from x
+                el.solve(rhs, g[:nf])  # g = G(x): one local/global step from x
+                if nr:
+                    g[nf:] = be.R_rhs.reshape(-1, 3)
                 y_aa = aa.step(x_it, g, x_aa) if aa is not None else None
                 if y_aa is not None and not plain_next:
-                    be.scatter(x_aa, free, P)
+                    if nr:  # the extrapolated rotations, made rotations again
+                        Rq = nearest_rotations(x_aa[nf:].reshape(-1, 3, 3))
+                        x_aa[nf:] = Rq.reshape(-1, 3)
+                        be.scatter(x_aa[:nf], free, P, Rq)
+                    else:
+                        be.scatter(x_aa, free, P)
                     phi = objective()
                     # the safeguard: an extrapolation is kept only when it lowers Phi, so
                     # Phi still never rises
@@ -335,7 +403,12 @@ class ImplicitEuler:
                     if accepted:
                         x_it, x_aa = x_aa, x_it
                 if not accepted:
-                    be.scatter(g, free, P)
+                    # with the rotations g was solved with (a refused extrapolation has
+                    # placed the parts with its own)
+                    if nr:
+                        be.scatter(g[:nf], free, P, g[nf:].reshape(-1, 3, 3))
+                    else:
+                        be.scatter(g, free, P)
                     if aa is not None:
                         x_it, g = g, x_it
             if not accepted:
@@ -355,7 +428,10 @@ class ImplicitEuler:
                 break
             if converged:
                 break
-        elastic = (phi_prev - beta * float(np.sum(m_int * (P - Y) ** 2))) * to_j
+        if self.parts is None:
+            elastic = (phi_prev - inertia()) * to_j
+        else:  # the last part fit moved P after the energy's rotations were fitted
+            elastic = self.energy_backend.local(P, np.empty_like(R)) * to_j
         X = P[inv] * s
         return Step(X, (X - x) / self.dt, hist, it, converged, max(elastic, 0.0)
                     if self.backend.nonneg else elastic, R[:p.n_vertices][inv],
@@ -378,4 +454,4 @@ class ImplicitEuler:
         s = p.scale
         P = np.ascontiguousarray(np.asarray(x, dtype=np.float64)[p.perm] / s)
         R = np.empty((p.energy.n_owners, 3, 3))
-        return float(self.backend.local(P, R)) * self.stiffness * s * s
+        return float(self.energy_backend.local(P, R)) * self.stiffness * s * s

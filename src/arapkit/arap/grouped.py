@@ -118,7 +118,7 @@ class GroupedProblem(ARAPProblem):
             return None
         base = self.iperm[ARAPProblem.constrained.func(self)]
         return PartSystem.build(self.layout, self.graph, self.energy.system_w, base, self.name,
-                                self._remedy())
+                                self._remedy(), nbh=self.energy.nbh)
 
     def _remedy(self) -> Advice | str:
         """What a factorisation failure advises (as the plain problem's)."""
@@ -160,19 +160,15 @@ class GroupedProblem(ARAPProblem):
         base = ARAPProblem.constrained_targets(self, targets)
         if self.layout is None:
             return base
-        ps = self.part_system
         known = np.zeros((self.n_vertices, 3))
         known[self.iperm[ARAPProblem.constrained.func(self)]] = base
-        cons = ps.elimination.constrained
-        n_held = len(cons) - int(np.count_nonzero(self.layout.part[cons] < 0))
-        C = np.empty((len(cons), 3))
-        C[:len(cons) - n_held] = known[cons[:len(cons) - n_held]]
-        C[len(cons) - n_held:] = ps.held_positions(self.vertices, known, self._diagonal,
-                                                   self.groups.source)
-        return C
+        return self.part_system.constrained_positions(self.vertices, known, self.diagonal,
+                                                      self.groups.source)
 
     @cached_property
-    def _diagonal(self) -> float:
+    def diagonal(self) -> float:
+        """The rest shape's bounding-box diagonal (solver units): a part's handles are
+        met when the best rigid motion misses them by less than a fraction of it."""
         V = self.vertices
         return float(np.linalg.norm(V.max(axis=0) - V.min(axis=0))) if len(V) else 1.0
 
@@ -256,12 +252,26 @@ class GroupedBackend:
         self._seen = None  # the position array of the solve under way (a weak reference)
         self.R_cur = self.R_rhs = None
         self._b = None
+        #: (n, 3) added to every vertex's right-hand side, solver numbering: a system whose
+        #: matrix adds a mass term adds its share here (implicit Euler's ``b M y``); None
+        #: for none
+        self.extra_rhs: np.ndarray | None = None
 
-    def bind(self, problem: GroupedProblem) -> GroupedBackend:
-        """Use ``problem`` (same energy and groups, possibly other handles)."""
-        self.inner.bind(problem)
+    def bind(self, problem: GroupedProblem, elimination=None,
+             parts: PartSystem | None = None) -> GroupedBackend:
+        """Use ``problem`` (same energy and groups, possibly other handles).
+
+        ``elimination`` and ``parts`` (another system's on the same vertices, e.g. a
+        dynamics step's, whose matrix adds the masses: :mod:`arapkit.arap.dynamics`) replace
+        the problem's own, which is then not factorised; with rigid parts, ``parts`` is
+        that system (and its elimination the one used).
+        """
+        if parts is None and elimination is not None and problem.layout is not None:
+            raise ValueError("GroupedBackend.bind: rigid parts need the system's parts")
+        self.inner.bind(problem, elimination if parts is None else parts.elimination)
         self.problem = problem
-        self._ps = problem.part_system
+        self._ps = parts if elimination is not None or parts is not None \
+            else problem.part_system
         self._seen = None
         return self
 
@@ -285,8 +295,12 @@ class GroupedBackend:
             if self._b is None or len(self._b) != len(P):
                 self._b = np.empty((len(P), 3))
             self.inner.vertex_rhs(self._b)
-            E += ps.fit(P, self._b, self.R_cur)
-            if self.nonneg:
+            if self.extra_rhs is not None:
+                self._b += self.extra_rhs
+            E += ps.fit(P, self._b, self.R_cur, R)
+            # with an extra term the fit's change is that of the whole objective, and the
+            # sum is no energy of its own (the caller adds the term's value from before)
+            if self.nonneg and self.extra_rhs is None:
                 E = max(E, 0.0)
         return E
 
@@ -303,12 +317,17 @@ class GroupedBackend:
         """The global step (the problem's factor: the merged one with rigid parts)."""
         if self._ps is None:
             return self.inner.solve(rhs, out)
-        return self.problem.elimination.solve(rhs, out)
+        return self._ps.elimination.solve(rhs, out)
 
-    def scatter(self, X: np.ndarray, idx: np.ndarray, P: np.ndarray) -> None:
-        """``P[idx] = X``, and every moving part placed about its centre."""
+    def scatter(self, X: np.ndarray, idx: np.ndarray, P: np.ndarray,
+                R: np.ndarray | None = None) -> None:
+        """``P[idx] = X``, and every moving part placed about its centre: with its rotation
+        of the last right-hand side, or ``R`` (rotations extrapolated with ``X``)."""
         ps = self._ps
-        if ps is not None and self._new_solve(P):
+        new = ps is not None and self._new_solve(P)
+        if R is not None:
+            self.R_rhs = np.array(R)
+        elif new:
             # a solve from rest: the loop solved before any local step, at the parts' rest
             # (free) and start (held) rotations
             self.R_rhs = ps.sync(P)

@@ -18,8 +18,13 @@ and the loop minimises it block by block, each block exactly, so it never rises:
 
       M_P = sum_{v in P} a_v b_v^T + sum_{e = (i in P, j not in P)} D_e a_i (x_j - t_P)^T,
 
-  a Procrustes problem (:func:`~arapkit.arap.rotations.fit_rotations`). Parts joined by an
-  edge are fitted one after the other (a greedy colouring), the others together;
+  a Procrustes problem (:func:`~arapkit.arap.rotations.fit_rotations`). The block also
+  holds the rotations ``R_k`` of the energy's neighbourhoods that lie inside the part: their
+  terms vanish at ``R_k = R_P`` whatever ``R_P`` is, so they leave ``M_P`` (their share,
+  ``Q_k R_k^T`` with ``Q_k = sum_v a_v c_kv^T``, is taken out) and follow the part. Held at
+  their old values instead they would pull the part back to its last rotation, and a part
+  would turn a little each iteration. Parts joined by an edge are fitted one after the other
+  (a greedy colouring), the others together;
 * **global step**: ``x = B y + z``, with ``y`` the free vertices and each free part's
   centre (``t_P``), ``B`` copying a centre to its part, and ``z`` the parts' offsets
   ``R_P a_v`` and the constrained positions. The minimiser solves
@@ -27,6 +32,12 @@ and the loop minimises it block by block, each block exactly, so it never rises:
   merged into one vertex (edges inside a part drop out). It does not depend on the
   rotations, so it is factorised once per handle set and reused for every target, as the
   plain problem's.
+
+A system with a diagonal term ``sum_v d_v |x_v|^2`` beside the edges (implicit Euler's masses,
+:mod:`arapkit.arap.dynamics`) passes ``diag``: it is summed into each merged row like the
+edges, adds ``-sum_{v in P} d_v a_v t_P^T`` to ``M_P``, and a free part then turns about its
+centre of ``d`` (``ref``) rather than its centre vertex: the block stays exact, and the turn
+keeps ``sum_v d_v x_v``, so a step's linear momentum is that of the global step's solution.
 
 Handles inside a part hold it (:func:`hold_parts`): three or more not on one line fix it
 (their best rigid fit places it: a set of handles no rigid motion meets is refused, naming
@@ -63,7 +74,7 @@ if TYPE_CHECKING:
     from .graph import EdgeGraph
 
 __all__ = ["FIXED", "FREE", "HINGE", "KINDS", "PART_TOL", "PIVOT", "PartHolds", "PartLayout",
-           "PartSystem", "hold_parts"]
+           "PartSystem", "hold_parts", "nearest_rotations"]
 
 #: how a part is held: by nothing, one handle, handles on a line, or three or more
 FREE, PIVOT, HINGE, FIXED = 0, 1, 2, 3
@@ -267,6 +278,16 @@ class PartSystem:
         How many of ``z_cols`` are free parts' non-centre vertices.
     cross_w : (c,) float
         ``D_e`` of the layout's crossing edges, for this energy.
+    ref : (P, 3) float or None
+        The point each part turns about in the local step, relative to its centre in rest
+        coordinates (None: the centre itself; with ``diag``, a free part's centre of
+        ``diag``).
+    diag_moment : (P, 3) float or None
+        ``sum_{v in P} d_v (a_v - ref_P)``: the diagonal term's share of ``M_P`` is minus
+        its product with the turning point (None without ``diag``).
+    interior : (owners, parts, Q) or None
+        The energy's neighbourhoods that lie inside one part, that part, and ``Q_k``
+        (None when not given the neighbourhoods).
     """
 
     layout: PartLayout
@@ -278,12 +299,19 @@ class PartSystem:
     z_cols: np.ndarray
     n_followers: int
     cross_w: np.ndarray
+    ref: np.ndarray | None = None
+    diag_moment: np.ndarray | None = None
+    interior: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @classmethod
     def build(cls, layout: PartLayout, graph: EdgeGraph, system_w: np.ndarray,
-              constrained: np.ndarray, name: str, remedy="") -> PartSystem:
+              constrained: np.ndarray, name: str, remedy="",
+              diag: np.ndarray | None = None, nbh=None) -> PartSystem:
         """Factorise the merged system for ``constrained`` (handles and anchors outside
-        parts and inside them, solver numbering)."""
+        parts and inside them, solver numbering); ``diag`` (n,), solver numbering, adds
+        ``sum_v d_v |x_v|^2`` to the energy (a mass term, see the module); ``nbh`` (the
+        energy's :class:`~arapkit.arap.rings.Neighbourhoods`) lets the part fit hold the
+        rotations of the neighbourhoods inside a part."""
         n = graph.n_vertices
         rest = graph.vertices
         holds = hold_parts(layout, constrained, rest)
@@ -303,8 +331,11 @@ class PartSystem:
         keep = ends[:, 0] != ends[:, 1]
         # followers are listed as constrained for the split (they are no unknowns) and
         # then dropped: no edge reaches them any more, so their columns are empty
+        d = None if diag is None else np.asarray(diag, dtype=np.float64)
         el = Elimination.from_edges(n, ends[keep], system_w[keep],
-                                    np.concatenate([cons, followers]), name, remedy)
+                                    np.concatenate([cons, followers]), name, remedy,
+                                    # a merged row holds its part's whole diagonal
+                                    diag=None if d is None else np.bincount(node, d, n))
         el = Elimination(el.free, cons, el.slot, el.A_fc[:, :len(cons)].tocsr(), el.factor)
         rows = el.slot[node]
         mine = rows >= 0
@@ -314,11 +345,24 @@ class PartSystem:
         L = sp.csc_matrix((np.concatenate([-system_w, -system_w, system_w, system_w]),
                            (np.concatenate([a, b, a, b]), np.concatenate([b, a, a, b]))),
                           shape=(n, n))
+        if d is not None:
+            L = (L + sp.diags(d)).tocsc()
         z_cols = np.concatenate([followers, cons]).astype(np.int64)
         A_z = L[:, z_cols].tocsr()
         a_v = rest[layout.verts] - rest[centre_of]
+        ref = dm = None
+        if d is not None:
+            k = layout.n_parts
+            dv = d[layout.verts]
+            d_p = np.bincount(vp, dv, k)
+            first = np.stack([np.bincount(vp, dv * a_v[:, c], k) for c in range(3)], axis=1)
+            ref = np.zeros((k, 3))
+            turn = (holds.kind == FREE) & (d_p > 0)  # held parts turn about their handles
+            ref[turn] = first[turn] / d_p[turn, None]
+            dm = first - d_p[:, None] * ref
         return cls(layout, holds, el, a_v, gather, A_z, z_cols, len(followers),
-                   system_w[layout.cross_edge])
+                   system_w[layout.cross_edge], ref, dm,
+                   None if nbh is None else _interior(layout, nbh, a_v))
 
     # -- the parts' motions ------------------------------------------------------------
     def place(self, P: np.ndarray, R: np.ndarray, slots: np.ndarray | None = None) -> None:
@@ -343,22 +387,36 @@ class PartSystem:
         self.place(P, R)
         return R
 
-    def moments(self, P: np.ndarray, b: np.ndarray, own: np.ndarray | None = None
-                ) -> np.ndarray:
+    def moments(self, P: np.ndarray, b: np.ndarray, own: np.ndarray | None = None,
+                R: np.ndarray | None = None) -> np.ndarray:
         """``M_P`` of every part at positions ``P`` and vertex right-hand sides ``b``;
-        ``own`` (:meth:`own_moments`, which does not move with ``P``) when known."""
-        lay, hold = self.layout, self.holds
+        ``own`` (:meth:`own_moments`, which does not move with ``P``) when known. With a
+        turning point (:attr:`ref`), the parts' rotations ``R`` place it and ``a_v`` is
+        taken from it."""
+        lay = self.layout
         k = lay.n_parts
         M = self.own_moments(b) if own is None else own.copy()
-        d = P[lay.cross_j] - P[hold.centre[lay.cross_part]]
-        ac = self.a[self._cross_slot] * self.cross_w[:, None]
+        g = self._turning_points(P, R)
+        d = P[lay.cross_j] - g[lay.cross_part]
+        a = self.a[self._cross_slot]
+        if self.ref is not None:
+            a = a - self.ref[lay.cross_part]
+        ac = a * self.cross_w[:, None]
         for r in range(3):
             for c in range(3):
                 M[:, r, c] += np.bincount(lay.cross_part, ac[:, r] * d[:, c], k)
+        if self.diag_moment is not None:
+            M -= self.diag_moment[:, :, None] * g[:, None, :]
         return M
 
+    def _turning_points(self, P: np.ndarray, R: np.ndarray | None) -> np.ndarray:
+        """(P, 3) where each part's turning point is: its centre, or ``ref`` placed."""
+        t = P[self.holds.centre]
+        return t if self.ref is None else t + np.einsum("pab,pb->pa", R, self.ref)
+
     def own_moments(self, b: np.ndarray) -> np.ndarray:
-        """``sum_{v in P} a_v b_v^T`` of every part: ``M_P`` less its crossing edges."""
+        """``sum_{v in P} (a_v - ref_P) b_v^T`` of every part: ``M_P`` less its crossing
+        edges and diagonal term."""
         lay = self.layout
         k = lay.n_parts
         bv = b[lay.verts]
@@ -366,6 +424,9 @@ class PartSystem:
         for r in range(3):
             for c in range(3):
                 M[:, r, c] = np.bincount(lay.vert_part, self.a[:, r] * bv[:, c], k)
+        if self.ref is not None:
+            bsum = np.stack([np.bincount(lay.vert_part, bv[:, c], k) for c in range(3)], 1)
+            M -= self.ref[:, :, None] * bsum[:, None, :]
         return M
 
     @cached_property
@@ -387,15 +448,26 @@ class PartSystem:
             out.append((parts, np.flatnonzero(np.isin(lay.vert_part, parts))))
         return out
 
-    def fit(self, P: np.ndarray, b: np.ndarray, R: np.ndarray) -> float:
-        """The local step of the parts: each moving part's best rotation with its centre
-        held, colour by colour (``P`` and ``R`` updated in place). Returns the energy's
-        change, ``-2 sum_P tr((R_new - R_old) M_P)`` (not positive, up to round-off)."""
+    def fit(self, P: np.ndarray, b: np.ndarray, R: np.ndarray,
+            R_own: np.ndarray | None = None) -> float:
+        """The local step of the parts: each moving part's best rotation with its turning
+        point held (its centre, or :attr:`ref`), colour by colour (``P`` and ``R`` updated
+        in place). Returns the energy's change, ``-2 sum_P tr((R_new - R_old) M_P)`` (not
+        positive, up to round-off). ``R_own`` (the energy's rotations from the local step)
+        lets the neighbourhoods inside a part turn with it (see the module); those
+        rotations are set to their part's."""
         hold = self.holds
         dE = 0.0
         own = self.own_moments(b) if self._colours else None
+        inside = self.interior if R_own is not None else None
+        if own is not None and inside is not None and len(inside[0]):
+            ks, kp, Q = inside
+            QR = Q @ R_own[ks].transpose(0, 2, 1)
+            for r in range(3):
+                for c in range(3):
+                    own[:, r, c] -= np.bincount(kp, QR[:, r, c], self.layout.n_parts)
         for parts, slots in self._colours:
-            M = self.moments(P, b, own)[parts]
+            M = self.moments(P, b, own, R)[parts]
             old = R[parts]
             new = np.empty_like(M)
             # serial: a few matrices, where a parallel region would cost a time slice
@@ -408,7 +480,12 @@ class PartSystem:
             gain = np.einsum("pab,pba->p", new, M) - np.einsum("pab,pba->p", old, M)
             R[parts] = new
             dE -= 2.0 * float(gain.sum())
+            if self.ref is not None:  # the turning point stays: the centre moves
+                c = hold.centre[parts]
+                P[c] += np.einsum("pab,pb->pa", old - new, self.ref[parts])
             self.place(P, R, slots)
+        if inside is not None:
+            R_own[inside[0]] = R[inside[1]]
         return dE
 
     def _hinge(self, P: np.ndarray, parts: np.ndarray, old: np.ndarray,
@@ -462,6 +539,18 @@ class PartSystem:
         return out
 
     # -- the held parts' placement ---------------------------------------------------------
+    def constrained_positions(self, rest: np.ndarray, known: np.ndarray, diag: float,
+                              source: str) -> np.ndarray:
+        """Positions of ``elimination.constrained``: the vertices outside parts read from
+        ``known`` (solver numbering; only their rows and the parts' handles' are read), the
+        held parts' placed by :meth:`held_positions`."""
+        cons = self.elimination.constrained
+        outside = int(np.count_nonzero(self.layout.part[cons] < 0))
+        C = np.empty((len(cons), 3))
+        C[:outside] = known[cons[:outside]]
+        C[outside:] = self.held_positions(rest, known, diag, source)
+        return C
+
     def held_positions(self, rest: np.ndarray, known: np.ndarray, diag: float,
                        source: str) -> np.ndarray:
         """Where the held parts' vertices start: fixed parts by the best rigid fit to their
@@ -492,3 +581,42 @@ class PartSystem:
             out.append((rest[vs] - rest[c]) @ R.T + known[c])
         return np.concatenate(out) if out else np.zeros((0, 3))
 
+
+
+def _interior(layout: PartLayout, nbh, a: np.ndarray) -> tuple[np.ndarray, ...]:
+    """The owners whose neighbourhood (every vertex its right-hand side touches) lies in one
+    part, that part, and ``Q_k = sum_v a_v c_kv^T`` (``a`` in ``layout.verts`` order)."""
+    ptr, idx, coef = nbh.disk_ptr, nbh.disk_idx, nbh.disk_coef
+    sizes = np.diff(ptr)
+    has = np.flatnonzero(sizes > 0)
+    pv = layout.part[idx]
+    if not len(has):
+        return np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((0, 3, 3))
+    lo, hi = np.minimum.reduceat(pv, ptr[has]), np.maximum.reduceat(pv, ptr[has])
+    inner = (lo == hi) & (lo >= 0)
+    owners, parts = has[inner].astype(np.int64), lo[inner].astype(np.int64)
+    mine = np.repeat(np.isin(np.arange(len(sizes)), owners), sizes)
+    local = np.repeat(np.arange(len(owners)), sizes[owners])
+    slot = np.full(len(layout.part), -1, dtype=np.int64)
+    slot[layout.verts] = np.arange(len(layout.verts))
+    av, cv = a[slot[idx[mine]]], coef[mine]
+    Q = np.empty((len(owners), 3, 3))
+    for r in range(3):
+        for c in range(3):
+            Q[:, r, c] = np.bincount(local, av[:, r] * cv[:, c], len(owners))
+    return owners, parts, Q
+
+
+def nearest_rotations(A: np.ndarray) -> np.ndarray:
+    """(k, 3, 3) the rotation nearest each of ``A`` (k, 3, 3) in the Frobenius norm: the
+    one maximising ``tr(R^T A) = tr(R A^T)`` (an extrapolated rotation made one again).
+
+    Examples
+    --------
+    >>> R = nearest_rotations(np.array([[[1.1, 0.1, 0], [-0.1, 0.9, 0], [0, 0, 1]]]))
+    >>> bool(np.allclose(R[0] @ R[0].T, np.eye(3))), round(float(np.linalg.det(R[0])), 12)
+    (True, 1.0)
+    """
+    out = np.empty_like(A)
+    fit_rotation_range(np.ascontiguousarray(A.transpose(0, 2, 1)), out, 0, len(A))
+    return out

@@ -12,10 +12,11 @@ keeps running beside them.
 Two kinds of request
 --------------------
 * **live** (a handle is being dragged): iterate warm-started from the last shape (with
-  Anderson acceleration where the method takes it) and send a shape every
-  :data:`FRAME_MS`; stop as soon as a newer request waits. A large mesh
-  iterates its proxy (:meth:`~arapkit.methods.multires.MultiresDeformer.preview`) and sends
-  the skinned full shape.
+  Anderson acceleration where the method takes it) and send a shape once
+  :data:`FRAME_MS` has passed since the last one; stop as soon as a newer request waits.
+  A large mesh iterates its proxy
+  (:meth:`~arapkit.methods.multires.MultiresDeformer.preview`) and sends the skinned full
+  shape.
 * **exact**: ``deformer.solve(targets)`` from rest, the same computation as a script's
   ``Deformer(...).solve(targets)``, so the shape key does not depend on the path the drag
   took: what the Deform button, rendering and ``blender -b`` ask for.
@@ -56,9 +57,11 @@ from ..methods.registry import method as method_info
 
 __all__ = ["FRAME_MS", "SETTLE_S", "LiveDeformer", "Shape"]
 
-#: a live solve sends a shape at least this often (ms): about 30 shapes a second while a
-#: handle is dragged, each one iteration or more
-FRAME_MS = 30.0
+#: a live solve sends a shape when this long (ms) has passed since the last one: one
+#: viewport frame at 60 Hz. Counted from the last shape sent, not from the start of a solve,
+#: so that a new pose that follows a quiet frame shows after its first iteration (each pose
+#: of a drag would otherwise pay a whole frame before it is seen).
+FRAME_MS = 1000.0 / 60.0
 #: a drag has stopped when no newer pose came for this long (s); then the exact solve runs
 SETTLE_S = 0.25
 
@@ -149,6 +152,7 @@ class LiveDeformer:
         self._open = True
         self._seq = 0
         self._latest: Shape | None = None
+        self._sent_at = -np.inf  # perf_counter() of the last shape sent
         self._taken = 0  # how many shapes had been sent when the caller last took one
         self._deformer: Any = None
         self._shape: np.ndarray | None = None  # the warm start of the next live solve
@@ -220,6 +224,7 @@ class LiveDeformer:
     def _publish(self, shape: Shape) -> None:
         with self._cond:
             self._latest = shape
+            self._sent_at = time.perf_counter()
             self.sent += 1
             self._cond.notify_all()
 
@@ -285,14 +290,13 @@ class LiveDeformer:
     def _live(self, d: Deformer, req: _Request) -> bool:
         """Iterate from the last shape, sending one every frame; True if it converged."""
         frame = self.frame_ms / 1e3
-        state = {"due": time.perf_counter() + frame, "sent": False}
+        state = {"sent": False}
 
         def callback(iteration: int, energy: float, V: np.ndarray) -> bool:
-            now = time.perf_counter()
-            if now >= state["due"]:
+            if time.perf_counter() >= self._sent_at + frame:
                 self._shape = V
                 self._publish(Shape(req.seq, V, False, False, iteration, energy, _ms(req)))
-                state["due"], state["sent"] = now + frame, True
+                state["sent"] = True
             # a newer pose stops this one, once it has shown something
             return state["sent"] and self._newer()
 

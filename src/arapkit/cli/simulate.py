@@ -43,6 +43,8 @@ EXAMPLES = [
     "-o bend.npz --figure bend.png",
     "arapkit simulate examples/cactus.off --handles examples/cactus.json --rings 3 "
     "-o cactus.obj   (cactus_0000.obj, cactus_0001.obj ...)",
+    "arapkit simulate examples/cactus.off --handles examples/cactus.json --groups "
+    "examples/cactus-groups.json --frames 60 -o rigid-arm.npz",
 ]
 
 
@@ -115,6 +117,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
     rig.add_argument("--rings-file", metavar="FILE",
                      help="per-vertex r: text (one integer per line), .npy, or PLY vertex "
                      "property 'rings'")
+    p.add_argument("--groups", "-G", metavar="FILE",
+                   help="rigid parts and shared-rotation groups, as for arapkit deform "
+                   "(docs/groups.md): a part moves by one rigid motion at every step")
     p.add_argument("--weights", default=DEFAULT_WEIGHTS, choices=WEIGHT_KINDS,
                    help=f"edge weights (default {DEFAULT_WEIGHTS})")
     p.add_argument("--energy", default="rring", metavar="NAME",
@@ -142,7 +147,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
     from arapkit.io import check_figure_format, check_output_path
     from arapkit.io.frames import frame_paths
 
-    inputs = [args.mesh, args.handles, args.transform, args.rings_file]
+    inputs = [args.mesh, args.handles, args.transform, args.rings_file, args.groups]
     paths = frame_paths(args.output, args.frames)
     for p in (paths[0], paths[-1]):
         check_output_path(p, inputs, args.force, "output")
@@ -208,7 +213,7 @@ def run(args: argparse.Namespace) -> int:
         ramp=args.ramp, gravity=args.gravity, rings=args.rings, rings_file=args.rings_file,
         weights=args.weights, energy=args.energy, dt=args.dt, stiffness=args.stiffness,
         density=args.density, damping=args.damping, mass=args.mass, tol=args.tol,
-        max_iter=args.max_iter, accelerate=args.accelerate,
+        max_iter=args.max_iter, accelerate=args.accelerate, groups=args.groups,
     )
     progress = _FrameProgress(args.frames - 1, args.quiet)
     try:
@@ -261,6 +266,7 @@ def _summary(args: argparse.Namespace, out: Any, written: list[Path], wall: floa
         f"frames: {len(traj.vertices)} ({traj.times[-1]:.4g} s at dt {args.dt:.4g} s)",
         f"vertices: {out.mesh.n_vertices}",
         f"handles: {len(traj.handles)}",
+        *([f"groups: {out.groups.summary()}"] if out.groups is not None else []),
         f"gravity: {_vec(out.gravity)}",
         "iterations per step: " + (f"mean {its.mean():.1f}, max {its.max()}" if len(its)
                                    else "none (one frame)"),

@@ -9,7 +9,9 @@ free parts behind and a stop lets them swing through and settle. Steps are
 :data:`EDITOR_DT` long and paced to the clock (a step that takes longer plays in slow
 motion); every step's shape is sent. The request ends, with a final update, once the body
 has settled: every vertex slower than :data:`SETTLED_SPEED` mesh diagonals per second for
-three steps in a row, or after :data:`MAX_SECONDS` of simulated time.
+three steps in a row, or after :data:`MAX_SECONDS` of simulated time. Painted rigid parts
+and shared-rotation groups go to the body as they go to the static solve (for the methods
+that take them): a rigid part swings as one piece.
 
 Units: the editor cannot know what a mesh's unit is, so the stiffness defaults to
 :func:`editor_stiffness`, the library's default scaled so that a mesh of any size wobbles
@@ -91,12 +93,15 @@ class SecondaryMotion:
                              f"vertices (this one has {mesh.n_vertices:,}); untick it")
         energy = _energy_of(s)
         rings = req.rings if s.info.rigidity_map else 1
+        # as the static solve: the painting is read by the methods that take groups
+        groups = req.groups if s.info.groups else None
         stiffness = editor_stiffness(mesh) if s.stiffness is None else s.stiffness
         key = (id(mesh), np.asarray(req.handles).tobytes(), np.asarray(rings).tobytes(),
-               s.weights, energy, stiffness, s.damping)
+               s.weights, energy, stiffness, s.damping, _groups_key(groups))
         if self.sim is None or key != self._key:
             self.sim = Simulator(mesh, req.handles, rings, s.weights, energy=energy,
-                                 dt=EDITOR_DT, stiffness=stiffness, damping=s.damping)
+                                 dt=EDITOR_DT, stiffness=stiffness, damping=s.damping,
+                                 groups=groups)
             self._key = key
             self.last = None
         if start is not self.last:  # an undo, a static solve, another mesh: start there
@@ -142,3 +147,10 @@ class SecondaryMotion:
                 time.sleep(wait)
             if superseded():
                 return
+
+
+def _groups_key(groups: Any) -> tuple:
+    """What of the groups (a VertexGroups or None) makes another body."""
+    if groups is None:
+        return ()
+    return (groups.names, np.asarray(groups.rigid).tobytes(), np.asarray(groups.ids).tobytes())

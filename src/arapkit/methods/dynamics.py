@@ -20,6 +20,10 @@ Handles are vertices whose positions are given at every step: pinned (``targets=
 keeps them where they are), or moved over time by a callable ``t -> (h, 3)`` such as
 :class:`Keyframes` or :func:`ramp`.
 
+``groups`` (as for :class:`~arapkit.methods.deformer.Deformer`, docs/groups.md) makes rigid
+parts, which move by one rigid motion at every step (a handle inside one carries it), and
+shared-rotation groups, whose members' neighbourhoods share one rotation.
+
 Examples
 --------
 >>> import numpy as np
@@ -30,6 +34,14 @@ Examples
 >>> traj.vertices.shape, round(float(traj.times[-1]), 6)
 ((31, 1154, 3), 1.0)
 >>> bool(traj.vertices[-1][:, 2].min() < -0.2)             # the free end sags
+True
+>>> from arapkit.mesh.groups import VertexGroups
+>>> tip = np.flatnonzero(m.vertices[:, 0] > 6)               # the last metre: rigid
+>>> g = VertexGroups.from_lists([("tip", tip, True)], m.n_vertices)
+>>> traj = simulate(m, 11, dt=1 / 30, handles=left, gravity=[0, 0, -9.81], groups=g)
+>>> d = traj.vertices[-1][tip] - traj.vertices[-1][tip[0]]
+>>> bool(np.allclose(np.linalg.norm(d, axis=1),
+...                  np.linalg.norm(m.vertices[tip] - m.vertices[tip[0]], axis=1), atol=1e-9))
 True
 """
 
@@ -57,6 +69,7 @@ from ..validate import (
     tolerance,
     vec3,
 )
+from .grouping import grouped_problem
 from .keyframes import Keyframes, ramp
 
 __all__ = ["DEFAULT_DAMPING", "DEFAULT_DT", "DEFAULT_STIFFNESS", "DEFAULT_TOL", "Keyframes",
@@ -160,6 +173,12 @@ class Simulator:
     accelerate : bool
         Anderson acceleration of each step's iterations, with the energy safeguard (the
         step's objective still never rises); default on (docs/dynamics.md measures it).
+    groups : VertexGroups or (n,) int, optional
+        Rigid parts and shared-rotation groups, as for
+        :class:`~arapkit.methods.deformer.Deformer` (e.g. :func:`arapkit.io.load_groups`;
+        an id array is libigl's ``G``, shared rotations). A part's vertices keep their
+        distances at every step; a part with handles that no rigid motion meets is
+        refused, naming it.
 
     Examples
     --------
@@ -177,7 +196,7 @@ class Simulator:
                  stiffness: float = DEFAULT_STIFFNESS, density: float = 1.0,
                  damping: float = DEFAULT_DAMPING, gravity=(0.0, 0.0, 0.0),
                  mass: str = "voronoi", tol: float = DEFAULT_TOL, max_iter: int = 1000,
-                 start: str = "inertial", accelerate: bool = True) -> None:
+                 start: str = "inertial", accelerate: bool = True, groups=None) -> None:
         self.mesh = mesh = as_mesh(mesh)
         n = mesh.n_vertices
         h = _handle_array(handles, n, mesh.name)
@@ -193,6 +212,10 @@ class Simulator:
         # vertex stands in when there is none, as the problem needs one
         self.problem = ARAPProblem.from_mesh(mesh, h if len(h) else [0], energy, weights,
                                              rings=rings)
+        #: the vertex groups in use (None: none)
+        self.groups = None
+        if groups is not None:
+            self.problem, self.groups = grouped_problem(self.problem, groups, energy, "cpu")
         self.system = ImplicitEuler(self.problem, self.masses, stiffness, check_dt(dt),
                                     damping, handles=h)
         self.positions = mesh.vertices.copy()
@@ -379,7 +402,8 @@ class Simulator:
                 "mass": self.mass_kind, "energy": self.problem.energy.name,
                 "weights": self.problem.weights_kind, "tol": self.tol,
                 "max_iter": self.max_iter, "start": self.start,
-                "accelerate": self.accelerate}
+                "accelerate": self.accelerate,
+                "groups": None if self.groups is None else self.groups.summary()}
 
 
 def simulate(mesh: Mesh, frames: int, dt: float = DEFAULT_DT, handles=None, targets=None,

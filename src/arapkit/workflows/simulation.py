@@ -68,6 +68,9 @@ class SimulationJob:
         Seconds over which moved handle groups reach their pose.
     gravity : (3,) or None
         m/s^2; None: :func:`default_gravity`.
+    groups : str or None
+        A groups file (rigid parts and shared-rotation groups, docs/groups.md, read by
+        :func:`arapkit.io.load_groups` as ``arapkit deform --groups``); None: none.
     rings, rings_file, weights, energy, dt, stiffness, density, damping, mass, tol,
     max_iter, accelerate :
         As for :class:`~arapkit.methods.dynamics.Simulator` (``rings_file`` as for
@@ -92,6 +95,7 @@ class SimulationJob:
     tol: float = _SIM["tol"]
     max_iter: int = _SIM["max_iter"]
     accelerate: bool = _SIM["accelerate"]
+    groups: str | None = None
 
 
 @dataclass
@@ -104,6 +108,8 @@ class SimulationResult:
     gravity: np.ndarray
     gravity_reason: str
     notes: list[str] = field(default_factory=list)
+    #: the vertex groups simulated with (None for none)
+    groups: Any = None
 
 
 def default_gravity(vertices: np.ndarray) -> tuple[np.ndarray, str]:
@@ -142,7 +148,7 @@ def run_simulation(job: SimulationJob, note: Callable[[str], None] | None = None
     InputError
         Any bad input, in one line naming the file or parameter.
     """
-    from ..io import load_handles, load_mesh, load_rings
+    from ..io import load_groups, load_handles, load_mesh, load_rings
 
     notes: list[str] = []
 
@@ -160,6 +166,7 @@ def run_simulation(job: SimulationJob, note: Callable[[str], None] | None = None
     elif job.transform is not None:
         raise InputError(f"{job.transform}: a .def transform needs a .sel handle file")
     rings = load_rings(job.rings_file, mesh.n_vertices) if job.rings_file else job.rings
+    groups = None if job.groups is None else load_groups(job.groups, mesh.vertices)
     if job.gravity is None:
         g, why = default_gravity(mesh.vertices)
     else:
@@ -167,11 +174,12 @@ def run_simulation(job: SimulationJob, note: Callable[[str], None] | None = None
     sim = Simulator(mesh, None if hs is None else hs.indices, rings, job.weights,
                     energy=job.energy, dt=job.dt, stiffness=job.stiffness,
                     density=job.density, damping=job.damping, gravity=g, mass=job.mass,
-                    tol=job.tol, max_iter=job.max_iter, accelerate=job.accelerate)
+                    tol=job.tol, max_iter=job.max_iter, accelerate=job.accelerate,
+                    groups=groups)
     targets = None
     if hs is not None and not np.array_equal(hs.targets, mesh.vertices[hs.indices]):
         sizes = np.cumsum([0] + [len(gr.indices) for gr in hs.groups])
         groups = [np.arange(a, b) for a, b in zip(sizes[:-1], sizes[1:])]
         targets = ramp(mesh.vertices[hs.indices], hs.targets, job.ramp, groups)
     traj = sim.run(job.frames, targets, callback=callback)
-    return SimulationResult(mesh, hs, traj, g, why, notes)
+    return SimulationResult(mesh, hs, traj, g, why, notes, sim.groups)

@@ -93,7 +93,7 @@ def closest_on_triangle(p: np.ndarray, a: np.ndarray, b: np.ndarray,
     return np.array([x, y, z]), region
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _tri_d2(X, i, V, F, f, tmp):
     a, b, c = V[F[f, 0]], V[F[f, 1]], V[F[f, 2]]
     x, y, z, reg = _closest_tri(X[i, 0], X[i, 1], X[i, 2], a, b, c)
@@ -102,9 +102,26 @@ def _tri_d2(X, i, V, F, f, tmp):
     return dx * dx + dy * dy + dz * dz, reg
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
+def _settled(i, X, start, prev, anchor, slack, owner):
+    """Whether the walk from ``prev[i]`` would stay there (see :func:`match_disks`)."""
+    if start.shape[1] != 0 or prev[i] < 0 or owner[i] != prev[i]:
+        return False
+    dx, dy, dz = X[i, 0] - anchor[i, 0], X[i, 1] - anchor[i, 1], X[i, 2] - anchor[i, 2]
+    return 4.0 * (dx * dx + dy * dy + dz * dz) < slack[i] * slack[i]
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _remember(i, X, best, second, settled, bf, anchor, slack, owner):
+    """Where the walk settled, on which element, and the margin to its neighbours."""
+    anchor[i, 0], anchor[i, 1], anchor[i, 2] = X[i, 0], X[i, 1], X[i, 2]
+    owner[i] = bf
+    slack[i] = np.sqrt(second) - np.sqrt(best) if settled else 0.0
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
 def _match_triangle(i, X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex,
-                    max_steps, q, elem, d2, on_border, tmp):
+                    max_steps, q, elem, d2, on_border, tmp, anchor, slack, owner):
     best = np.inf
     bf = -1
     breg = 0
@@ -117,18 +134,26 @@ def _match_triangle(i, X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, bord
         if dd < best:
             best, bf, breg = dd, f, reg
             bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
-    for _ in range(max_steps):
-        moved = False
-        cur = bf
-        for t in range(nbr_ptr[cur], nbr_ptr[cur + 1]):
-            f = nbr_idx[t]
-            dd, reg = _tri_d2(X, i, V, F, f, tmp)
-            if dd < best:
-                best, bf, breg = dd, f, reg
-                bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
-                moved = True
-        if not moved:
-            break
+    if not _settled(i, X, start, prev, anchor, slack, owner):
+        settled = False
+        second = np.inf
+        for _ in range(max_steps):
+            moved = False
+            second = np.inf
+            cur = bf
+            for t in range(nbr_ptr[cur], nbr_ptr[cur + 1]):
+                f = nbr_idx[t]
+                dd, reg = _tri_d2(X, i, V, F, f, tmp)
+                if dd < best:
+                    best, bf, breg = dd, f, reg
+                    bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
+                    moved = True
+                elif dd < second:
+                    second = dd
+            if not moved:
+                settled = True
+                break
+        _remember(i, X, best, second, settled, bf, anchor, slack, owner)
     q[i, 0], q[i, 1], q[i, 2] = bq0, bq1, bq2
     elem[i] = bf
     d2[i] = best
@@ -146,82 +171,102 @@ def _match_triangle(i, X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, bord
 
 @nb.njit(parallel=True, cache=True, nogil=True)
 def _match_triangles_parallel(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge,
-                              border_vertex, max_steps, q, elem, d2, on_border):
+                              border_vertex, max_steps, q, elem, d2, on_border, anchor, slack,
+                              owner):
     for i in nb.prange(X.shape[0]):
         _match_triangle(i, X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex,
-                        max_steps, q, elem, d2, on_border, np.empty(3))
+                        max_steps, q, elem, d2, on_border, np.empty(3), anchor, slack, owner)
 
 
 @nb.njit(cache=True, nogil=True)
 def _match_triangles_serial(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge,
-                            border_vertex, max_steps, q, elem, d2, on_border):
+                            border_vertex, max_steps, q, elem, d2, on_border, anchor, slack,
+                            owner):
     tmp = np.empty(3)
     for i in range(X.shape[0]):
         _match_triangle(i, X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex,
-                        max_steps, q, elem, d2, on_border, tmp)
+                        max_steps, q, elem, d2, on_border, tmp, anchor, slack, owner)
 
 
 def match_triangles(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex,
-                    max_steps, q, elem, d2, on_border):
+                    max_steps, q, elem, d2, on_border, anchor, slack, owner):
     """Closest point on a triangle mesh for every row of X.
 
     Candidates: ``start[i]`` (from a k-d tree; -1 entries skipped) and ``prev[i]`` (the last
     match, -1 if none); then a greedy walk over ``nbr`` (faces sharing a vertex) while the
     distance drops, at most ``max_steps`` moves. ``on_border[i]`` is True when the closest
     point lies on a boundary edge (``border_edge[f, e]``, e = ab, ac, bc) or a boundary
-    vertex. Threads from :data:`PARALLEL_QUERIES` queries on.
+    vertex. Threads from :data:`PARALLEL_QUERIES` queries on. ``anchor``, ``slack`` and
+    ``owner`` are the walk's memory (see :func:`match_disks`).
     """
     kernel = (_match_triangles_parallel if len(X) >= PARALLEL_QUERIES
               else _match_triangles_serial)
     kernel(X, V, F, nbr_ptr, nbr_idx, start, prev, border_edge, border_vertex, max_steps, q,
-           elem, d2, on_border)
+           elem, d2, on_border, anchor, slack, owner)
+
+
+@nb.njit(cache=True, nogil=True, inline="always")
+def _disk_d2(x0, x1, x2, P, N, radius, j):
+    """Squared distance from x to disk j, and whether its closest point is on the rim."""
+    dx, dy, dz = x0 - P[j, 0], x1 - P[j, 1], x2 - P[j, 2]
+    h = dx * N[j, 0] + dy * N[j, 1] + dz * N[j, 2]
+    t2 = dx * dx + dy * dy + dz * dz - h * h  # squared distance within the disk's plane
+    r = radius[j]
+    if t2 > r * r:  # beyond the disk: the closest point is on its rim
+        e = np.sqrt(t2) - r
+        return h * h + e * e, True
+    return h * h, False
 
 
 @nb.njit(cache=True, nogil=True)
-def _disk_d2(X, i, P, N, radius, j, tmp):
-    dx, dy, dz = X[i, 0] - P[j, 0], X[i, 1] - P[j, 1], X[i, 2] - P[j, 2]
+def _disk_point(x0, x1, x2, P, N, radius, j, q, i):
+    """The closest point of disk j to x, into row i of q (for the match found only)."""
+    dx, dy, dz = x0 - P[j, 0], x1 - P[j, 1], x2 - P[j, 2]
     h = dx * N[j, 0] + dy * N[j, 1] + dz * N[j, 2]
     tx, ty, tz = dx - h * N[j, 0], dy - h * N[j, 1], dz - h * N[j, 2]
     t2 = tx * tx + ty * ty + tz * tz
-    rim = False
     r = radius[j]
-    if t2 > r * r:  # beyond the disk: the closest point is on its rim
+    if t2 > r * r:
         s = r / np.sqrt(t2)
         tx, ty, tz = tx * s, ty * s, tz * s
-        rim = True
-    tmp[0], tmp[1], tmp[2] = P[j, 0] + tx, P[j, 1] + ty, P[j, 2] + tz
-    ex, ey, ez = X[i, 0] - tmp[0], X[i, 1] - tmp[1], X[i, 2] - tmp[2]
-    return ex * ex + ey * ey + ez * ez, rim
+    q[i, 0], q[i, 1], q[i, 2] = P[j, 0] + tx, P[j, 1] + ty, P[j, 2] + tz
 
 
-@nb.njit(cache=True, nogil=True)
+@nb.njit(cache=True, nogil=True, inline="always")
 def _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point, max_steps,
-                q, elem, d2, on_border, tmp):
+                q, elem, d2, on_border, anchor, slack, owner):
+    # distances only while searching: the closest point is made once, for the winner
+    x0, x1, x2 = X[i, 0], X[i, 1], X[i, 2]
     best = np.inf
     bj = -1
     brim = False
-    bq0 = bq1 = bq2 = 0.0
     for t in range(start.shape[1] + 1):
         j = prev[i] if t == start.shape[1] else start[i, t]
         if j < 0:
             continue
-        dd, rim = _disk_d2(X, i, P, N, radius, j, tmp)
+        dd, rim = _disk_d2(x0, x1, x2, P, N, radius, j)
         if dd < best:
             best, bj, brim = dd, j, rim
-            bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
-    for _ in range(max_steps):
-        moved = False
-        cur = bj
-        for t in range(nbr_ptr[cur], nbr_ptr[cur + 1]):
-            j = nbr_idx[t]
-            dd, rim = _disk_d2(X, i, P, N, radius, j, tmp)
-            if dd < best:
-                best, bj, brim = dd, j, rim
-                bq0, bq1, bq2 = tmp[0], tmp[1], tmp[2]
-                moved = True
-        if not moved:
-            break
-    q[i, 0], q[i, 1], q[i, 2] = bq0, bq1, bq2
+    if not _settled(i, X, start, prev, anchor, slack, owner):
+        settled = False
+        second = np.inf
+        for _ in range(max_steps):
+            moved = False
+            second = np.inf
+            cur = bj
+            for t in range(nbr_ptr[cur], nbr_ptr[cur + 1]):
+                j = nbr_idx[t]
+                dd, rim = _disk_d2(x0, x1, x2, P, N, radius, j)
+                if dd < best:
+                    best, bj, brim = dd, j, rim
+                    moved = True
+                elif dd < second:
+                    second = dd
+            if not moved:
+                settled = True
+                break
+        _remember(i, X, best, second, settled, bj, anchor, slack, owner)
+    _disk_point(x0, x1, x2, P, N, radius, bj, q, i)
     elem[i] = bj
     d2[i] = best
     on_border[i] = brim and border_point[bj]
@@ -229,31 +274,37 @@ def _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
 
 @nb.njit(parallel=True, cache=True, nogil=True)
 def _match_disks_parallel(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
-                          max_steps, q, elem, d2, on_border):
+                          max_steps, q, elem, d2, on_border, anchor, slack, owner):
     for i in nb.prange(X.shape[0]):
         _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
-                    max_steps, q, elem, d2, on_border, np.empty(3))
+                    max_steps, q, elem, d2, on_border, anchor, slack, owner)
 
 
 @nb.njit(cache=True, nogil=True)
 def _match_disks_serial(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
-                        max_steps, q, elem, d2, on_border):
-    tmp = np.empty(3)
+                        max_steps, q, elem, d2, on_border, anchor, slack, owner):
     for i in range(X.shape[0]):
         _match_disk(i, X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point,
-                    max_steps, q, elem, d2, on_border, tmp)
+                    max_steps, q, elem, d2, on_border, anchor, slack, owner)
 
 
 def match_disks(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point, max_steps,
-                q, elem, d2, on_border):
+                q, elem, d2, on_border, anchor, slack, owner):
     """Closest point on a union of oriented disks (one per cloud point) for every row of X.
 
     As :func:`match_triangles`; ``on_border[i]`` is True when the closest point is on the
     rim of a boundary point's disk (x lies beyond the scan's edge).
+
+    The walk's memory: where query i last settled (``anchor[i]``, on element ``owner[i]``)
+    and by how much every neighbour of that element was farther (``slack[i]``, a
+    distance). A distance to a fixed set moves by at most as much as the query, so a query
+    that has moved less than ``slack / 2`` since, and starts from that element without a
+    k-d search, would find every neighbour still farther: the walk would stay, and is
+    skipped (the same answer, one distance instead of a neighbourhood's). Updated in place.
     """
     kernel = _match_disks_parallel if len(X) >= PARALLEL_QUERIES else _match_disks_serial
     kernel(X, P, N, radius, nbr_ptr, nbr_idx, start, prev, border_point, max_steps, q, elem,
-           d2, on_border)
+           d2, on_border, anchor, slack, owner)
 
 
 @nb.njit(parallel=True, cache=True, nogil=True)

@@ -65,6 +65,8 @@ AUTO_SCALE = 2.0
 #: "no overlap": fewer than this fraction of the template's vertices within 10 % of the
 #: larger diagonal from the target after the placement
 MIN_OVERLAP = 0.01
+#: the overlap test asks every this-many-th vertex first (see ``Fitter._check_overlap``)
+OVERLAP_STRIDE = 8
 
 
 @dataclass
@@ -248,15 +250,19 @@ class Fitter:
         s0, R0, t0 = T
         inner = tgt.moved(s0 * unit, R0, t0)  # the target in the template's frame and units
         L_tf = (lt - t0) @ R0 / s0  # the landmarks' targets in the template's frame
-        X = V
+        X, found = V, None
         if len(lv):
-            X = self._bend(lv, L_tf, T, fit_scale, inner, stages, timings)
+            X, found = self._bend(lv, L_tf, T, fit_scale, inner, stages, timings)
         system = self._system(lv)
         f0, fs0 = system.factorisations, system.factor_s
         loop = StageLoop(self.backend, system, inner, np.ascontiguousarray(X[p.perm] / unit),
                          L_tf / unit, self.weights, self.rest_normals,
                          p.energy.rest_term, self.diagonal, self.edge, fit_scale,
                          self.accelerate, self.tol, self.stage_iter, timings)
+        if found is not None:
+            # the bend's matches were searched at these very positions: the first stage walks
+            # from them instead of searching again (the same matches)
+            loop.prev = found[p.perm]
         stages += loop.run(self.schedule)
         timings["factorisation"] = system.factor_s - fs0
         out = s0 * (loop.P[p.iperm] * unit) @ R0.T + t0
@@ -278,8 +284,9 @@ class Fitter:
         return FitResult(out, residuals, matched, report, T, self.template)
 
     def _bend(self, lv, L_tf, T: Similarity, fit_scale: bool, inner: FitTarget, stages,
-              timings) -> np.ndarray:
-        """The template bent onto its landmarks by ARAP (template frame).
+              timings) -> tuple[np.ndarray, np.ndarray]:
+        """The template bent onto its landmarks by ARAP (template frame), and the target
+        elements its vertices are closest to.
 
         ARAP with a few point handles has several minima, and the one the local/global
         iteration finds depends on its start. Two starts are tried: the template placed by
@@ -300,18 +307,20 @@ class Fitter:
             if np.sqrt(((here - V) ** 2).sum(axis=1).mean()) > 0.01 * self.diagonal * \
                     self.problem.scale:
                 starts.append(here)
-        best, best_d = None, np.inf
+        best, best_d, found = None, np.inf, None
         cap = (0.05 * self.diagonal * self.problem.scale) ** 2
         for start in starts:
-            res = arap_solve(problem, L_tf, init=start, accelerate=True, max_iter=LANDMARK_ITER)
-            d = float(np.minimum(inner.match(res.vertices / self.problem.scale).d2
-                                 * self.problem.scale ** 2, cap).mean())
+            # the Fitter's backend (the same energy): not another one built per solve
+            res = arap_solve(problem, L_tf, init=start, backend=self.backend, accelerate=True,
+                             max_iter=LANDMARK_ITER)
+            m = inner.match(res.vertices / self.problem.scale)
+            d = float(np.minimum(m.d2 * self.problem.scale ** 2, cap).mean())
             if d < best_d:
-                best, best_d = res, d
+                best, best_d, found = res, d, m.element
         timings["landmarks"] = time.perf_counter() - t1
         stages.append(StageReport("landmarks", None, best.iterations, list(best.history),
                                   time_s=timings["landmarks"]))
-        return best.vertices
+        return best.vertices, found
 
     def _fits_scale(self, lv: np.ndarray, lt: np.ndarray) -> bool:
         """Whether this fit fits the template's size (see ``scale``)."""
@@ -341,8 +350,9 @@ class Fitter:
         rep = StageReport("rigid", None, 0)
         near = 0.5 * self.template.mean_edge_length
         acc = np.zeros(len(V), dtype=bool)
+        memo = tgt.memo(len(V))
         for it in range(RIGID_ITER):
-            m = tgt.match(s * V @ R.T + t, prev, search=prev is None)
+            m = tgt.match(s * V @ R.T + t, prev, search=prev is None, memo=memo)
             prev = m.element
             if it == 0:
                 elig = eligible(m, normals @ R.T, tgt.oriented, near)
@@ -369,14 +379,22 @@ class Fitter:
         V = self.template.vertices
         X = s * V @ R.T + t
         reach = 0.1 * max(tgt.diagonal, s * self.diagonal * self.problem.scale)
+        need = max(3, MIN_OVERLAP * len(V))
         # the nearest element centre: at least as far as the element, so never an overlap
-        # the surface does not have (and one k-d query, not a search and walk)
-        near = int(np.count_nonzero(tgt.tree.query(X, k=1, distance_upper_bound=reach,
-                                                   workers=-1)[0] <= reach))
-        if near < max(3, MIN_OVERLAP * len(V)) and tgt.kind == "mesh":
+        # the surface does not have (and one k-d query, not a search and walk). Every
+        # OVERLAP_STRIDE-th vertex first: on a target that overlaps, these alone usually
+        # reach ``need``, and the rest is not asked (the same decision as counting all; a
+        # k-d query of a far vertex is the slow kind)
+        near = 0
+        for part in range(OVERLAP_STRIDE):
+            near += int(np.count_nonzero(tgt.nearest(X[part::OVERLAP_STRIDE], 1, reach)[0]
+                                         <= reach))
+            if near >= need:
+                return
+        if tgt.kind == "mesh":
             # large triangles have far centres: ask the triangles themselves
             near = int(np.count_nonzero(tgt.match(X).d2 <= reach * reach))
-        if near < max(3, MIN_OVERLAP * len(V)):
+        if near < need:
             raise InputError(
                 f"{tgt.name}: no overlap with the template {self.template.name} (only {near} "
                 f"of {len(V)} vertices within 10 % of the diagonal after the initial "

@@ -126,6 +126,7 @@ class StageLoop:
         self._zeros = np.zeros((nf, 3))
         self._fixed = (self.system.L_fc @ self.C if len(self.C) else np.zeros((nf, 3)))
         self.P[self.system.constrained] = self.C  # the landmarks are where they must be
+        self.memo = self.target.memo(len(self.P))  # the walks' memory, across the stages
 
     # -- one evaluation -----------------------------------------------------------------
     def measure(self, x: np.ndarray, search: bool = False) -> tuple[Matches, float]:
@@ -139,7 +140,7 @@ class StageLoop:
         if self.scale and tr > 0 and self.rest_term > 0:
             self.sigma = tr / self.rest_term
         t1 = time.perf_counter()
-        m = self.target.match(P, self.prev, search=search)
+        m = self.target.match(P, self.prev, search=search, memo=self.memo)
         self.timings["local"] += t1 - t0
         self.timings["matching"] += time.perf_counter() - t1
         s = self.sigma

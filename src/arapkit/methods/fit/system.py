@@ -12,6 +12,9 @@ whatever the matches are: it depends on the template, the landmark vertices and 
 only, not on the target. :class:`StageSystems` factorises it once per stage and keeps the
 factors for every later fit of the same template with the same landmark vertices (a
 sequence of scans), so an iteration costs one pair of triangular solves and a fit none.
+The stages' matrices differ in their diagonal only: one symbolic analysis serves them all
+(:class:`~arapkit.methods.fit.ldl.SharedPattern`), and a stage's factor is a numeric
+refactorisation (10-12 ms instead of 50 ms at 13,750 vertices).
 
 The alternative, a matrix that changes with the matches (a factor at each stage's start,
 then conjugate gradients preconditioned with it), needed a factorisation and 38-130 CG steps
@@ -34,7 +37,7 @@ import time
 import numpy as np
 import scipy.sparse as sp
 
-from ...arap.constraints import CholeskyFactor
+from .ldl import LDLFactor, SharedPattern
 
 __all__ = ["StageSystems"]
 
@@ -66,18 +69,20 @@ class StageSystems:
         self.L_fc = Lf[:, self.constrained].tocsr()
         self.name = name
         self.delta = float(delta)
-        self._factors: dict[float, CholeskyFactor] = {}
+        self._pattern = SharedPattern(self.L_ff, f"{name}: fit system")
+        self._Ldiag = self.L_ff.diagonal()
+        self._factors: dict[float, LDLFactor] = {}
         self.factorisations = 0
         self.factor_s = 0.0
 
-    def factor(self, key: float, w: np.ndarray) -> CholeskyFactor:
+    def factor(self, key: float, w: np.ndarray) -> LDLFactor:
         """The factor of ``L_ff + diag(w) + delta I`` for stage ``key`` (made on first use;
         ``w`` must be the same whenever ``key`` is)."""
         f = self._factors.get(key)
         if f is None:
             t0 = time.perf_counter()
-            M = self.L_ff + sp.diags(np.asarray(w, dtype=np.float64) + self.delta)
-            f = self._factors[key] = CholeskyFactor(M, f"{self.name}: fit system")
+            f = self._factors[key] = self._pattern.factor(
+                self._Ldiag + np.asarray(w, dtype=np.float64) + self.delta)
             self.factorisations += 1
             self.factor_s += time.perf_counter() - t0
         return f
