@@ -306,12 +306,16 @@ def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[s
     """
     from ..io import save_mesh
 
-    # the result itself: a point cloud's normals turn by its rotations
+    # the result itself: a point cloud's normals turn by its rotations. Energy and rings
+    # go to PLY only, which has room for them: a mesh's other formats drop them silently,
+    # and a cloud's writer would warn about values the caller never asked for
+    name = os.fspath(output).lower()
+    ply = name.removesuffix(".gz").endswith(".ply")
     return save_mesh(
         output,
         res,
         vertex_properties={"energy": res.vertex_energy,
-                           "rings": prepared.rings.astype(np.int32)},
+                           "rings": prepared.rings.astype(np.int32)} if ply else None,
         like=prepared.mesh,
     )
 
