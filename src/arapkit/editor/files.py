@@ -206,7 +206,7 @@ class FileActions:
 
         self._check_upload(name, data, "meshes")
         if not (is_readable_mesh(name) or is_cloud_file(name)):
-            raise InputError(f"{name}: not a mesh or point cloud file (use "
+            raise InputError(f"{name}: not a mesh file or point cloud (use "
                              f"{shape_formats_text()})")
         mesh = self._via_tempfile(name, data, load_shape)  # a file without faces: a cloud
         mesh.name = safe_stem(name)

@@ -65,14 +65,15 @@ def _ext(path: str) -> str:
 
 
 def is_cloud_file(path: str | os.PathLike) -> bool:
-    """Whether the extension names a format only point clouds come in (xyz, npy).
+    """Whether the extension names a format only point clouds come in (xyz, npy; not the
+    generic ``.txt`` / ``.pts`` that :func:`load_points` also reads as ``.xyz``).
 
     Examples
     --------
-    >>> is_cloud_file("scan.XYZ"), is_cloud_file("scan.pts"), is_cloud_file("scan.ply")
-    (True, True, False)
+    >>> is_cloud_file("scan.XYZ"), is_cloud_file("scan.txt"), is_cloud_file("scan.ply")
+    (True, False, False)
     """
-    return _ext(os.fspath(path)) in (*XYZ_FORMATS, *XYZ_ALIASES, "npy")
+    return _ext(os.fspath(path)) in (*XYZ_FORMATS, "npy")
 
 
 def normals_of(attrs: MeshAttributes) -> np.ndarray | None:

@@ -24,7 +24,7 @@ import os
 
 import numpy as np
 
-from .clouds import XYZ_ALIASES, XYZ_FORMATS, is_cloud_file
+from .clouds import XYZ_ALIASES, XYZ_FORMATS
 from .clouds import load_points as load_cloud
 
 __all__ = ["POINT_FORMATS", "is_point_file", "load_points", "ply_points"]
@@ -42,7 +42,8 @@ def is_point_file(path: str | os.PathLike) -> bool:
     >>> is_point_file("scan.NPY"), is_point_file("scan.off")
     (True, False)
     """
-    return is_cloud_file(path)
+    name = os.fspath(path).lower()
+    return name.removesuffix(".gz").endswith(POINT_FORMATS)
 
 
 def load_points(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray | None]:
