@@ -60,7 +60,8 @@ Usage for the scan::
         --subdivide 1 --rings 1 --steps 20 --rate 20 --modes paced
 
 ``--specks N`` adds N single triangles floating round the surface first (a photogrammetry
-scan's floaters; the drag is laid out on the mesh without them).
+scan's floaters; the drag is laid out on the mesh without them). ``--cloud`` opens the
+mesh's vertices as a point cloud instead (issue 46: the editor drags a 400K-point cloud).
 """
 
 from __future__ import annotations
@@ -147,7 +148,9 @@ while not stop.is_set():
     size = int.from_bytes(frame[:8], "little")
     packed = int.from_bytes(frame[8:16], "little")
     head = dec.decompress(frame[16:16 + packed], max_output_size=size)
-    shape = b"vertices" in head and (b"/mesh/shaded" in head or b"/mesh/preview" in head)
+    # a mesh node's vertices, or (a point cloud) its splats' points
+    shape = ((b"vertices" in head and (b"/mesh/shaded" in head or b"/mesh/preview" in head))
+             or (b"points" in head and (b"/mesh/points" in head or b"/mesh/preview" in head)))
     print(f"{t!r} {len(frame)} {int(shape)}", flush=True)
 ws.close()
 """
@@ -157,9 +160,9 @@ class FrameCounter:
     """A websocket client of the editor that timestamps every frame it receives.
 
     A frame counts as a shape when it carries a mesh node's new vertices (the shaded mesh
-    or the preview proxy): what a browser would draw. The client runs in its own process,
-    as a browser does: in the editor's process its decoding took the editor's GIL (the
-    release at 437K took about 0.25 s longer with it,
+    or the preview proxy; a point cloud's splat node's points): what a browser would draw.
+    The client runs in its own process, as a browser does: in the editor's process its
+    decoding took the editor's GIL (the release at 437K took about 0.25 s longer with it,
     ``docs/studies/interactive-at-scale.md``, item 19).
     ``frames`` holds ``(perf_counter time, bytes, shape)`` as they arrive. The client's
     process id goes into ``ignore`` (a :class:`Watch`'s) as soon as it starts, so that the
@@ -539,6 +542,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--specks", type=int, default=0,
                     help="add this many single triangles floating near the surface first, "
                          "like a photogrammetry scan's floaters (seed 0)")
+    ap.add_argument("--cloud", action="store_true",
+                    help="open the mesh's vertices as a point cloud (k = 10, issue 46): "
+                         "splats, previewed on a voxel subsample")
     ap.add_argument("--quick", action="store_true",
                     help="20 steps, paced only (what `make bench`/run_all.py --quick use)")
     args = ap.parse_args(argv)
@@ -567,7 +573,13 @@ def main(argv: list[str] | None = None) -> int:
     if args.specks:
         frame = mesh.vertices if frame is None else frame  # the drag is laid out without them
         mesh = with_specks(mesh, args.specks)
-    print(f"mesh {Path(args.mesh).name}: {mesh.n_vertices:,} vertices, {mesh.n_faces:,} faces; "
+    if args.cloud:
+        from arapkit import PointCloud
+
+        mesh = PointCloud(mesh.vertices, name=f"{mesh.name} points")
+    kind = (f"{mesh.n_faces:,} faces" if mesh.faces is not None
+            else f"a point cloud ({mesh.graph_description})")
+    print(f"mesh {Path(args.mesh).name}: {mesh.n_vertices:,} vertices, {kind}; "
           f"{args.steps}-step drag, paced at {args.rate:g} Hz")
     print(f"{'r':>2} {'mode':>10} {'median ms':>10} {'p95 ms':>8} {'max ms':>8} "
           f"{'dropped':>8} {'target':>7} {'final E':>10} {'iters':>6}")

@@ -12,6 +12,9 @@ licence (MIT, see ``pyproject.toml``); no third-party data is involved.
 * ``bar.sel`` / ``bar.def``: the bar's end caps as a Botsch-Sorkine selection (left cap
   fixed, right cap a handle) and a transform lifting the handle.
 * ``bar-rings.txt``: a two-material rigidity map for the bar (middle third r = 2, rest 6).
+* ``cactus-points.ply``: 2,000 points sampled on the cactus's surface (uniformly by area,
+  seed 46), a point cloud with normals, colours and a custom property ``part`` (0 pot,
+  1 plant), float32 like a scanner's; ``cactus.json`` moves it as it moves the mesh.
 * ``finger-scan.xyz`` / ``finger-landmarks.json``: a scan of the finger bent 60 degrees (1,200
   points with normals, 0.2 % noise, the 30 % facing away from the scanner missing) and
   three of the finger's vertices with their positions in it, for ``arapkit fit``.
@@ -35,6 +38,8 @@ import trimesh
 
 from arapkit.io import save_def, save_mesh, save_rings, save_sel
 from arapkit.io.landmarks import save_landmarks
+from arapkit.mesh.attributes import MeshAttributes
+from arapkit.mesh.cloud import PointCloud
 from arapkit.mesh.shapes import bar, bar_two_materials
 
 HERE = Path(__file__).resolve().parent
@@ -125,6 +130,49 @@ def finger_bend(V: np.ndarray, degrees: float) -> np.ndarray:
     return out
 
 
+def cactus_points(V: np.ndarray, F: np.ndarray, n: int = 2000, seed: int = 46) -> PointCloud:
+    """``n`` points on the cactus's surface with normals, colours and a ``part`` label."""
+    rng = np.random.default_rng(seed)
+    tm = trimesh.Trimesh(V, F, process=False)
+    area = tm.area_faces
+    f = rng.choice(len(F), n, p=area / area.sum())
+    u, v = rng.random(n), rng.random(n)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    B = np.stack([1 - u - v, u, v], axis=1)
+    P = np.einsum("nk,nkd->nd", B, V[F[f]]).astype(np.float32)
+    N = np.einsum("nk,nkd->nd", B, tm.vertex_normals[F[f]])
+    N = (N / np.linalg.norm(N, axis=1)[:, None]).astype(np.float32)
+    pot = P[:, 1] < 2.1
+    shade = rng.integers(-12, 13, n)
+    rgb = np.where(pot[:, None], [176, 92, 58], [70, 140, 62]) + shade[:, None]
+    props = {"nx": N[:, 0], "ny": N[:, 1], "nz": N[:, 2]}
+    props |= {c: np.clip(rgb[:, i], 0, 255).astype(np.uint8)
+              for i, c in enumerate(("red", "green", "blue"))}
+    props["part"] = (~pot).astype(np.uint8)
+    none = np.zeros(0, dtype=np.int64)
+    attrs = MeshAttributes("ply", none, none, vertex_properties=props)
+    return PointCloud(P.astype(np.float64), N, name="cactus-points.ply", attributes=attrs)
+
+
+def _float32_ply(path: Path, cloud: PointCloud) -> None:
+    """The cloud as a scanner writes it: float32 positions, then its properties."""
+    dt = [(c, "<f4") for c in "xyz"] + [
+        (k, np.dtype(v.dtype).newbyteorder("<").str)
+        for k, v in cloud.attributes.vertex_properties.items()]
+    rec = np.empty(cloud.n_vertices, dtype=dt)
+    for i, c in enumerate("xyz"):
+        rec[c] = cloud.points[:, i]
+    for k, v in cloud.attributes.vertex_properties.items():
+        rec[k] = v
+    names = {"<f4": "float", "|u1": "uchar"}
+    head = ["ply", "format binary_little_endian 1.0",
+            "comment cactus surface sampled by examples/make_examples.py",
+            f"element vertex {cloud.n_vertices}"]
+    head += [f"property {names[np.dtype(t).str]} {k}" for k, t in dt] + ["end_header"]
+    path.write_bytes(("\n".join(head) + "\n").encode() + rec.tobytes())
+
+
 def finger_scan(V: np.ndarray, F: np.ndarray, n: int = 1200, seed: int = 0):
     """A one-sided scan of the surface (V, F): ``n`` points drawn by area with their
     triangles' normals and 0.2 % noise, less the 30 % whose normals face most away from a
@@ -172,6 +220,7 @@ def main(out: Path = HERE) -> None:
 
     Vc, Fc = cactus()
     save_mesh(out / "cactus.off", Vc, Fc)
+    _float32_ply(out / "cactus-points.ply", cactus_points(Vc, Fc))
 
 
 if __name__ == "__main__":

@@ -137,7 +137,8 @@ def test_save_mesh_takes_a_mesh_a_trimesh_or_a_result(cactus, tmp_path):
 @pytest.mark.parametrize("given, says", [
     (str(MESH), "got str (load a file with arapkit.load_mesh)"),
     (None, "got NoneType"),
-    (np.eye(3), "got ndarray"),
+    # an (n, 3) array is a point cloud (docs/clouds.md); a flat one is nothing
+    (np.zeros(5), "got ndarray"),
 ])
 def test_what_is_not_a_mesh_gets_one_line(cactus, given, says):
     _, hs, _ = cactus

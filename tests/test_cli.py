@@ -404,7 +404,8 @@ def _bad_inputs(tmp: Path, mesh_path: Path, V: np.ndarray):
             "bad output format",
             ["deform", mesh_path, "--handles", good, "-o", tmp / "out.xyz2"],
             "out.xyz2",
-            "unsupported mesh format",
+            # the input's name could hold a mesh or a point cloud: both lists are given
+            "unsupported output format",
         ),
         (
             "bad def",

@@ -7,7 +7,9 @@ methods, :data:`~arapkit.methods.registry.INTERFACES`,
 an interface that claims a method but cannot run it fails here. A cell either runs (exit 0,
 finite, deformed, handles met: to round-off for hard constraints, within the method's
 ``handle_tol`` for soft ones) or is refused with its one-line message (exit 2 on the
-command line).
+command line). Every cell runs on the example mesh and, for the doors that take one, on the
+example point cloud (``examples/cactus-points.ply``): a method defined on triangles (the
+registry's ``needs_faces``), a volume or a Laplacian start is refused there.
 """
 
 from __future__ import annotations
@@ -34,6 +36,10 @@ from arapkit.methods.registry import (
 ROOT = Path(__file__).resolve().parents[1]
 MESH = ROOT / "examples" / "cactus.off"
 HANDLES = ROOT / "examples" / "cactus.json"
+#: the same cactus as a point cloud (the same handle file selects on its points)
+CLOUD = ROOT / "examples" / "cactus-points.ply"
+#: the shape file of each domain
+SHAPES = {"mesh": MESH, "cloud": CLOUD}
 #: a rigid left arm (held by its hand's handles) and a right arm with one shared rotation
 GROUPS = ROOT / "examples" / "cactus-groups.json"
 #: a rigid part keeps its edge lengths to this, relative to each edge
@@ -55,6 +61,7 @@ class Variant:
     rings: str = "1"
     volumetric: bool = False
     init: str = "identity"
+    domain: str = "mesh"
     groups: bool = False
 
     @property
@@ -63,7 +70,7 @@ class Variant:
         extra += ["volumetric"] * self.volumetric + (["laplacian-init"] if self.init !=
                                                       "identity" else [])
         extra += ["groups"] * self.groups
-        return "-".join([self.energy, *extra])
+        return "-".join([*(["cloud"] if self.domain == "cloud" else []), self.energy, *extra])
 
     def refusal(self, interface: str) -> str | None:
         """The fragment of the one-line refusal this cell must give; None if it runs."""
@@ -72,6 +79,13 @@ class Variant:
             return "unknown key 'volumetric'"
         if interface not in can.interfaces:
             return NOT_OFFERED[interface]
+        if self.domain == "cloud":
+            if not can.applies_to(False):
+                return "needs a triangle mesh"
+            if self.volumetric:
+                return "fills a closed triangle surface"
+            if self.init == "laplacian":
+                return "(Laplacian editing) needs a triangle mesh"
         if self.volumetric and not can.volumetric:
             return "volumetric=True runs r-ring ARAP"
         if self.rings != "1" and not can.rigidity_map:
@@ -94,6 +108,15 @@ def _variants() -> list[Variant]:
                 Variant(e, vol_r, volumetric=True), Variant(e, init="laplacian"),
                 # rigid parts and shared rotations, with the mixed map where there is one
                 Variant(e, vol_r, groups=True)]
+    # on the point cloud: each cell with one reason to refuse (a method on triangles is
+    # asked for plainly; the others as on the mesh)
+    for e in method_names():
+        can = method(e)
+        out.append(Variant(e, domain="cloud"))
+        if can.applies_to(False):
+            out += [Variant(e, "3", domain="cloud"), Variant(e, "mixed", domain="cloud"),
+                    Variant(e, volumetric=True, domain="cloud"),
+                    Variant(e, init="laplacian", domain="cloud")]
     return out
 
 
@@ -101,6 +124,13 @@ def _variants() -> list[Variant]:
 #: editor take no method name for a method they do not list, the layer has no volume)
 def _expressible(v: Variant, interface: str) -> bool:
     can = method(v.energy)
+    if v.domain == "cloud":
+        if interface == "blender":  # Blender's objects are meshes
+            return False
+        if interface in ("compare", "editor"):  # they list only what applies to a cloud
+            return (interface in can.interfaces and can.applies_to(False)
+                    and not v.volumetric and v.init == "identity"
+                    and (v.rings == "1" or can.rigidity_map))
     if interface == "compare":  # runs its fixed set: nothing to ask, nothing to refuse
         from arapkit.workflows.compare import RINGS_METHOD
 
@@ -133,8 +163,10 @@ CELLS = [pytest.param(v, i, id=f"{v.id}@{i}") for v in _variants() for i in INTE
 
 
 @cache
-def _case():
-    mesh = load_mesh(MESH)
+def _case(domain: str = "mesh"):
+    from arapkit.io import load_shape
+
+    mesh = load_mesh(MESH) if domain == "mesh" else load_shape(CLOUD)
     hs = load_handles(HANDLES, mesh.vertices)
     # stiff arms, soft trunk: a per-vertex map with both values
     mixed = np.where(mesh.vertices[:, 1] > 6.0, 3, 1).astype(np.int32)
@@ -142,21 +174,22 @@ def _case():
 
 
 def _rings(v: Variant):
-    _, _, mixed = _case()
+    _, _, mixed = _case(v.domain)
     return mixed if v.rings == "mixed" else int(v.rings)
 
 
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("doors")
-    _, _, mixed = _case()
-    save_rings(d / "mixed.txt", mixed)
+    for domain in SHAPES:
+        _, _, mixed = _case(domain)
+        save_rings(d / f"mixed-{domain}.txt", mixed)
     return d
 
 
 def _check_deformed(v: Variant, V: np.ndarray) -> None:
     """Finite, deformed beyond the handles, handles at their targets, rigid parts rigid."""
-    mesh, hs, _ = _case()
+    mesh, hs, _ = _case(v.domain)
     diag = mesh.bounding_box_diagonal
     assert V.shape == mesh.vertices.shape and np.isfinite(V).all()
     free = np.setdiff1d(np.arange(mesh.n_vertices), hs.indices)
@@ -182,7 +215,7 @@ def _groups():
 
 
 def _library(v: Variant, folder: Path) -> np.ndarray:
-    mesh, hs, _ = _case()
+    mesh, hs, _ = _case(v.domain)
     kw = {"volumetric": True} if v.volumetric else {}
     if v.groups:
         kw["groups"] = _groups()
@@ -199,14 +232,14 @@ def _ply(path: Path) -> np.ndarray:
 
 def _cli_rings(v: Variant, folder: Path) -> list[str]:
     return [] if v.rings == "1" else (["--rings", v.rings] if v.rings != "mixed"
-                                      else ["--rings-file", str(folder / "mixed.txt")])
+                                      else ["--rings-file", str(folder / f"mixed-{v.domain}.txt")])
 
 
 def _deform(v: Variant, folder: Path, capsys) -> np.ndarray:
     from arapkit.cli import main
 
     out = folder / f"{v.id}.ply"
-    argv = ["deform", str(MESH), "--handles", str(HANDLES), "--energy", v.energy,
+    argv = ["deform", str(SHAPES[v.domain]), "--handles", str(HANDLES), "--energy", v.energy,
             *_cli_rings(v, folder), "--init", v.init, *(["--volumetric"] * v.volumetric),
             *(["--groups", str(GROUPS)] * v.groups), "-o", str(out), "-q", "--force"]
     capsys.readouterr()
@@ -219,27 +252,29 @@ def _deform(v: Variant, folder: Path, capsys) -> np.ndarray:
 
 
 @cache
-def _compare_run(folder: Path) -> tuple[dict, Path]:
-    """``arapkit compare`` once, with r = 3, the mixed map and the volume: label -> kw."""
+def _compare_run(folder: Path, domain: str = "mesh") -> tuple[dict, Path]:
+    """``arapkit compare`` once, with r = 3, the mixed map and (a mesh) the volume:
+    label -> kw."""
     from arapkit.cli import main
     from arapkit.workflows.compare import method_list
 
-    out = folder / "compare"
-    code = main(["compare", str(MESH), "--handles", str(HANDLES), "--rings", "3",
-                 "--rings-file", str(folder / "mixed.txt"), "--volumetric", "-o", str(out),
-                 "--quiet"])
+    out = folder / f"compare-{domain}"
+    volume = domain == "mesh"
+    code = main(["compare", str(SHAPES[domain]), "--handles", str(HANDLES), "--rings", "3",
+                 "--rings-file", str(folder / f"mixed-{domain}.txt"),
+                 *(["--volumetric"] * volume), "-o", str(out), "--quiet"])
     assert code == 0
-    _, _, mixed = _case()
-    return dict(method_list(3, mixed, volumetric=True)), out
+    _, _, mixed = _case(domain)
+    return dict(method_list(3, mixed, volumetric=volume, has_faces=volume)), out
 
 
 def _compare(v: Variant, folder: Path, capsys) -> np.ndarray:
     from arapkit.cli.compare import _slug
 
-    labels, out = _compare_run(folder)
+    labels, out = _compare_run(folder, v.domain)
     want = _rings(v)
 
-    n = _case()[0].n_vertices
+    n = _case(v.domain)[0].n_vertices
 
     def same(kw: dict) -> bool:
         return (kw["energy"] == v.energy and bool(kw.get("volumetric")) == v.volumetric
@@ -254,10 +289,10 @@ def _compare(v: Variant, folder: Path, capsys) -> np.ndarray:
 def _batch(v: Variant, folder: Path, capsys) -> np.ndarray:
     from arapkit.workflows.batch import normalise_job, run_job
 
-    job = {"mesh": str(MESH), "handles": str(HANDLES), "energy": v.energy, "init": v.init,
-           "output": f"{v.id}.ply"}
+    job = {"mesh": str(SHAPES[v.domain]), "handles": str(HANDLES), "energy": v.energy,
+           "init": v.init, "output": f"{v.id}.ply"}
     if v.rings == "mixed":
-        job["rings_file"] = str(folder / "mixed.txt")
+        job["rings_file"] = str(folder / f"mixed-{v.domain}.txt")
     else:
         job["rings"] = int(v.rings)
     if v.volumetric:
@@ -275,8 +310,9 @@ def _editor(v: Variant, folder: Path, capsys) -> np.ndarray:
     from arapkit.editor.settings import SolverSettings, solver_choices
     from arapkit.editor.worker import SolveRequest, SolveWorker
 
-    mesh, hs, _ = _case()
-    assert any((c.method, c.volumetric) == (v.energy, v.volumetric) for c in solver_choices())
+    mesh, hs, _ = _case(v.domain)
+    assert any((c.method, c.volumetric) == (v.energy, v.volumetric)
+               for c in solver_choices(mesh.faces is not None))
     updates = []
     w = SolveWorker(updates.append)
     w.start()
@@ -300,7 +336,7 @@ def _torch(v: Variant, folder: Path, capsys) -> np.ndarray:
     torch = pytest.importorskip("torch", reason="PyTorch not installed")
     from arapkit.torch import ARAPLayer
 
-    mesh, hs, _ = _case()
+    mesh, hs, _ = _case(v.domain)
     layer = ARAPLayer(mesh, hs.indices, rings=_rings(v), energy=v.energy,
                       dtype=torch.float64, **({"groups": _groups()} if v.groups else {}))
     return layer(torch.tensor(hs.targets)).detach().numpy()

@@ -128,6 +128,22 @@ def test_importing_the_figures_without_matplotlib_names_the_extra():
     assert proc.stdout == "True arapkit.plots needs the plots extra: pip install 'arapkit[plots]'\n"
 
 
+def test_cloud_laplacian_weights_without_the_clouds_extra_name_it():
+    code = (
+        "import numpy as np, arapkit\n"
+        "c = arapkit.PointCloud(np.random.default_rng(0).random((30, 3)))\n"
+        "print(arapkit.Deformer(c, [0]).weights_kind)\n"  # the default needs nothing
+        "try:\n"
+        "    arapkit.Deformer(c, [0], weights='laplacian')\n"
+        "except ImportError as e:\n"
+        "    print(isinstance(e, arapkit.InputError), e)\n"
+    )
+    proc = python_without(("robust_laplacian",), code)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == ("gaussian\nTrue weights='laplacian' needs the clouds extra: "
+                           "pip install 'arapkit[clouds]'\n")
+
+
 def _pyproject() -> dict:
     tomllib = pytest.importorskip("tomllib")  # Python 3.11+
     return tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
@@ -147,9 +163,10 @@ def test_core_dependencies_carry_no_gui_or_plotting_stack():
     assert "matplotlib" in _names(extras["plots"])
     assert {"viser", "matplotlib"} <= _names(extras["editor"])
     # all: every extra but torch (.ci/run adds it) and the test tools
-    assert extras["all"] == ["arapkit[plots,editor,batch,volume,image]"]
-    assert set(extras) == {"plots", "editor", "batch", "torch", "volume", "image", "all",
-                           "test"}
+    assert extras["all"] == ["arapkit[plots,editor,batch,volume,clouds,image]"]
+    assert set(extras) == {"plots", "editor", "batch", "torch", "volume", "clouds", "image",
+                           "all", "test"}
+    assert _names(extras["clouds"]) == {"robust-laplacian"}
     assert {"pillow", "scikit-image", "shapely", "PythonCDT"} <= _names(extras["image"])
 
 

@@ -19,7 +19,7 @@ from arapkit import Deformer, InputError, Mesh
 from arapkit.arap.constraints import Followers, rigid_motion, rigid_motions
 from arapkit.mesh.shapes import bar, bar_bend
 from arapkit.methods.deformer import MULTIRES_AUTO_VERTICES, coarse_to_fine
-from arapkit.methods.multires import MultiresDeformer, decimate, specks
+from arapkit.methods.multires import MultiresDeformer, decimate, specks, start_decimation
 
 
 @pytest.fixture(scope="module")
@@ -550,20 +550,30 @@ def test_the_proxy_does_not_depend_on_units_or_placement():
 def test_the_editor_starts_a_large_meshs_proxy_before_solving(big, monkeypatch):
     """``SolveWorker.expect``: a mesh that will be solved coarse to fine is decimated in a
     child while the page is set up; a volume or 'multires off' is not."""
+    import dataclasses
+
     import arapkit.methods.dispatch as deformer_module
     from arapkit.editor.settings import SolverSettings
     from arapkit.editor.worker import SolveWorker
+    from arapkit.methods.multires import coarsening_of
+    from arapkit.methods.multires.coarsening import register_coarsening
 
     mesh = big[0]
     monkeypatch.setattr(deformer_module, "MULTIRES_AUTO_VERTICES", 5000)
     started: list = []
-    monkeypatch.setattr("arapkit.editor.worker.start_decimation",
-                        lambda m, *a: started.append(m) or True)
-    w = SolveWorker(lambda u: None)
-    w.expect(mesh, SolverSettings())
-    w.expect(mesh, SolverSettings(multires=False))
-    w.expect(mesh, SolverSettings(volumetric=True))
-    w.expect(bar(), SolverSettings())  # below the (patched) size: no
+    # the mesh domain's coarse copies start through the coarsening table (decimation)
+    decimating = coarsening_of(mesh)
+    assert decimating.start is start_decimation
+    register_coarsening("mesh", dataclasses.replace(
+        decimating, start=lambda m, *a: started.append(m) or True))
+    try:
+        w = SolveWorker(lambda u: None)
+        w.expect(mesh, SolverSettings())
+        w.expect(mesh, SolverSettings(multires=False))
+        w.expect(mesh, SolverSettings(volumetric=True))
+        w.expect(bar(), SolverSettings())  # below the (patched) size: no
+    finally:
+        register_coarsening("mesh", decimating)
     assert started == [mesh]
 
 

@@ -50,7 +50,7 @@ README = ROOT / "README.md"
 PAGES = ("README.md", "docs/solver.md", "docs/handles.md", "docs/cli.md", "docs/learning.md",
          "docs/editor.md", "docs/torch.md", "docs/volumetric.md", "docs/interactive.md",
          "docs/dynamics.md", "docs/smooth-arap.md", "docs/2d.md",
-         "docs/groups.md", "docs/fit.md")
+         "docs/groups.md", "docs/fit.md", "docs/clouds.md")
 #: docs pages with blocks that look runnable but are not, and why
 NOT_RUN_PAGES = {
     "docs/api-contract.md": "a signature sheet (names and defaults, not a program)",

@@ -30,11 +30,13 @@ from .io import (
     load_groups,
     load_handles,
     load_mesh,
+    load_points,
     load_rings,
     parse_handles,
     save_def,
     save_handles,
     save_mesh,
+    save_points,
     save_rings,
     save_sel,
     select_box,
@@ -42,6 +44,7 @@ from .io import (
     select_sphere,
 )
 from .learn.fit import LearnedRings, learn_rings
+from .mesh.cloud import Graph, PointCloud
 from .mesh.groups import VertexGroups
 from .mesh.model import Mesh
 from .mesh.orientation import BoundingBox, UpGuess, bounding_box, guess_up
@@ -74,9 +77,11 @@ __all__ = [
     "HandleGroup",
     "HandleSet",
     "InputError",
+    "Graph",
     "LaplacianEditor",
     "LearnedRings",
     "Mesh",
+    "PointCloud",
     "Result",
     "Simulator",
     "UpGuess",
@@ -90,11 +95,13 @@ __all__ = [
     "load_groups",
     "load_handles",
     "load_mesh",
+    "load_points",
     "load_rings",
     "parse_handles",
     "save_def",
     "save_handles",
     "save_mesh",
+    "save_points",
     "save_rings",
     "save_sel",
     "select_box",

@@ -100,6 +100,17 @@ class Advice(str):
         escaped = prefix.replace("{", "{{").replace("}", "}}")
         return Advice(escaped + self._template, **self._options)
 
+    def before(self, suffix: str) -> Advice:
+        """This advice with plain text after it (the text is kept verbatim).
+
+        Examples
+        --------
+        >>> Advice("use {weights}", weights="uniform").before(" here").worded_for("cli")
+        'use --weights uniform here'
+        """
+        escaped = suffix.replace("{", "{{").replace("}", "}}")
+        return Advice(self._template + escaped, **self._options)
+
 
 def worded_for(message: object, interface: str) -> str:
     """``message`` worded for ``interface`` when it is :class:`Advice`, else ``str(message)``.

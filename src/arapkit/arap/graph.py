@@ -2,7 +2,8 @@
 
 :class:`EdgeGraph` is what every energy, backend and constraint of :mod:`arapkit.arap` reads:
 a triangle mesh's edges (:meth:`EdgeGraph.from_mesh`) or any graph, e.g. a tetrahedral mesh's
-edges. :func:`unit_scale` picks the power of two the solver divides positions by, and
+edges, a point cloud's neighbourhood graph (:meth:`EdgeGraph.from_cloud`).
+:func:`unit_scale` picks the power of two the solver divides positions by, and
 :func:`bandwidth_order` the vertex order it works in.
 """
 
@@ -18,6 +19,7 @@ from ..errors import InputError
 from ..mesh.topology import EdgeTopology
 
 if TYPE_CHECKING:
+    from ..mesh.cloud import PointCloud
     from ..mesh.model import Mesh
 
 __all__ = ["EdgeGraph", "bandwidth_order", "check_graph", "unit_scale"]
@@ -62,6 +64,12 @@ class EdgeGraph(EdgeTopology):
         # the mesh has already labelled its components: do not search again
         return cls(mesh.vertices, mesh.edges, mesh.name, mesh.faces, mesh.face_edges,
                    (mesh.n_components, mesh.component_labels))
+
+    @classmethod
+    def from_cloud(cls, cloud: PointCloud) -> EdgeGraph:
+        """The neighbourhood graph of a point cloud (or a given graph), without triangles."""
+        return cls(cloud.vertices, cloud.edges, cloud.name, None, None,
+                   (cloud.n_components, cloud.component_labels))
 
     @property
     def n_components(self) -> int:

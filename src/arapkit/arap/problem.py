@@ -36,11 +36,13 @@ from .constraints import (
     check_handles,
     return_free_memory,
 )
+from .domains import domain_of
 from .energies import energy_info, make_energy
 from .graph import EdgeGraph, bandwidth_order, check_graph, unit_scale
 from .rings import check_rings
 
 if TYPE_CHECKING:
+    from ..mesh.cloud import PointCloud
     from ..mesh.model import Mesh
     from .energies.base import NeighbourhoodEnergy
 
@@ -93,21 +95,26 @@ class ARAPProblem:
 
     # -- construction --------------------------------------------------------------
     @classmethod
-    def from_mesh(cls, mesh: Mesh, handles, energy="rring", weights: str | None = None, *,
-                  rings=1, free_components: str = "follow", reorder: bool = True,
-                  dim: int = 3, **energy_options) -> ARAPProblem:
-        """Precompute ARAP on a triangle mesh.
+    def from_mesh(cls, mesh: Mesh | PointCloud, handles, energy="rring",
+                  weights: str | None = None, *, rings=1, free_components: str = "follow",
+                  reorder: bool = True, dim: int = 3, **energy_options) -> ARAPProblem:
+        """Precompute ARAP on a triangle mesh or a point cloud's graph.
 
         Parameters
         ----------
-        mesh : Mesh
+        mesh : Mesh or PointCloud
+            The shape (its domain, :func:`arapkit.arap.domains.domain_of`, says how its
+            edge graph and weights are made).
         handles : (h,) int
             Constrained vertices.
         energy : str
             A registered energy of the local/global solver
-            (:func:`arapkit.arap.energies.energy_names`).
-        weights : str, optional
-            Edge weighting (default :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`).
+            (:func:`arapkit.arap.energies.energy_names`); one defined on triangles is
+            refused on a point cloud.
+        weights : str or (m,) array, optional
+            Edge weighting: a kind of the shape's domain (default: the domain's own,
+            ``cotan-clamped`` on a mesh and ``gaussian`` on a point cloud), or one weight
+            per edge.
         rings : int or (n,) int
             r per vertex for ``energy="rring"``.
         free_components, reorder :
@@ -124,23 +131,23 @@ class ARAPProblem:
         >>> p = ARAPProblem.from_mesh(bar(), [0, 1], rings=2)
         >>> p.n_vertices, p.energy.name
         (1154, 'rring')
+        >>> from arapkit.mesh.cloud import PointCloud
+        >>> ARAPProblem.from_mesh(PointCloud(bar().vertices), [0, 1]).weights_kind
+        'gaussian'
         """
         from ..mesh.planar import PlanarInput
-        from ..mesh.weights import DEFAULT_WEIGHTS, edge_weights
 
         t0 = time.perf_counter()
-        shape = PlanarInput.of(mesh)
-        mesh = shape.mesh
         if dim not in (2, 3):
             raise InputError(f"dim: expected 2 or 3, got {dim!r}")
-        if dim == 2 and not shape.planar:
-            raise InputError(f"{mesh.name}: dim=2 needs a planar mesh (one z for every "
+        planar = PlanarInput.of_shape(mesh)  # a mesh, or a point cloud (never planar)
+        shape = planar.mesh
+        if dim == 2 and not planar.planar:
+            raise InputError(f"{shape.name}: dim=2 needs a planar mesh (one z for every "
                              "vertex, or (n, 2) positions)")
-        kind = DEFAULT_WEIGHTS if weights is None else weights
-        w = edge_weights(mesh, kind)
-        if not isinstance(kind, str):  # explicit per-edge weights: no kind to name
-            kind = None
-        return cls._build(EdgeGraph.from_mesh(mesh), w, kind, handles, energy, rings,
+        dom = domain_of(shape)
+        w, kind = dom.edge_weights(shape, weights)
+        return cls._build(dom.graph(shape), w, kind, handles, energy, rings,
                           free_components, reorder, energy_options, t0, dim)
 
     @classmethod

@@ -11,10 +11,12 @@ from typing import Any
 
 from arapkit import validate
 from arapkit.errors import InputError
+from arapkit.mesh.neighbours import MAX_NEIGHBOURS
 
 __all__ = [
     "Progress",
     "RingProgress",
+    "add_graph_options",
     "add_weld_option",
     "add_view_options",
     "iteration_cap",
@@ -23,6 +25,7 @@ __all__ = [
     "port",
     "positive_float",
     "positive_int",
+    "neighbour_count",
     "ring_size",
     "tolerance",
     "upload_mb",
@@ -56,6 +59,9 @@ tolerance = _option_type(validate.tolerance, "tolerance")
 iteration_cap = _option_type(validate.iteration_cap, "iteration_cap")
 #: argparse type: a ring size r (1..MAX_RINGS)
 ring_size = _option_type(validate.ring_size, "ring_size")
+#: argparse type: a point cloud's neighbour count k (1..MAX_NEIGHBOURS)
+neighbour_count = _option_type(lambda t, w: validate.integer(t, w, lo=1, hi=MAX_NEIGHBOURS),
+                               "neighbour_count")
 #: argparse type: a TCP port (1..65535)
 port = _option_type(validate.port, "port")
 #: argparse type: an upload cap in MiB (finite, > 0)
@@ -135,6 +141,18 @@ def add_weld_option(p: argparse.ArgumentParser) -> None:
         "results are written to the input's own vertices (put it after MESH, or write "
         "--weld=TOL)",
     )
+
+
+def add_graph_options(p: argparse.ArgumentParser) -> None:
+    """``--neighbours K`` / ``--radius R``: a point cloud's graph (:class:`arapkit.PointCloud`)."""
+    from arapkit.mesh.neighbours import DEFAULT_NEIGHBOURS
+
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--neighbours", "-k", type=neighbour_count, default=None, metavar="K",
+                   help="a point cloud's graph: each point linked to its K nearest "
+                   f"(symmetrised; default {DEFAULT_NEIGHBOURS})")
+    g.add_argument("--radius", type=positive_float, default=None, metavar="R",
+                   help="a point cloud's graph: every pair of points closer than R instead")
 
 
 def maybe_weld(mesh, tol: float | None):

@@ -14,10 +14,12 @@ import argparse
 import time
 from pathlib import Path
 
+from arapkit.arap.domains import all_weight_kinds
 from arapkit.cli.common import (
     Progress,
     RingProgress,
     add_example_epilog,
+    add_graph_options,
     add_view_options,
     add_weld_option,
     note,
@@ -26,8 +28,9 @@ from arapkit.cli.common import (
     warn,
 )
 from arapkit.errors import InputError, require_extra
-from arapkit.io.formats import readable_formats
-from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.io.clouds import shape_formats_text
+from arapkit.mesh.cloud_weights import DEFAULT_CLOUD_WEIGHTS
+from arapkit.mesh.weights import DEFAULT_WEIGHTS
 
 __all__ = ["add_parser", "run"]
 
@@ -46,7 +49,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
             "arapkit compare bar.off --handles bar.json --rings-file r.txt -o cmp",
         ]),
     )
-    p.add_argument("mesh", metavar="MESH", help=f"input mesh ({readable_formats()}; may be .gz)")
+    p.add_argument("mesh", metavar="MESH",
+                   help=f"input mesh or point cloud ({shape_formats_text()}); on a point "
+                   "cloud only the methods that apply run (docs/clouds.md)")
     p.add_argument("--handles", "-H", required=True, metavar="FILE",
                    help="handle groups (.json) or a per-vertex status file (.sel)")
     p.add_argument("--transform", "-T", metavar="FILE",
@@ -55,8 +60,10 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
                    help="r of the uniform r-ring run (default 3)")
     p.add_argument("--rings-file", metavar="FILE",
                    help="per-vertex r for an extra mixed-r run (text, .npy or PLY 'rings')")
-    p.add_argument("--weights", default=DEFAULT_WEIGHTS, choices=WEIGHT_KINDS,
-                   help=f"edge weights of the ARAP methods (default {DEFAULT_WEIGHTS})")
+    p.add_argument("--weights", default=None, choices=all_weight_kinds(),
+                   help=f"edge weights of the ARAP methods (default {DEFAULT_WEIGHTS} on a "
+                   f"mesh, {DEFAULT_CLOUD_WEIGHTS} on a point cloud)")
+    add_graph_options(p)
     p.add_argument("--sr-alpha", metavar="A", help="SR-ARAP alpha (default 0.02)")
     p.add_argument("--nodes", metavar="N", help="embedded deformation graph nodes (default 200)")
     p.add_argument("--tol", type=positive_float, default=1e-3,
@@ -124,16 +131,26 @@ def run(args: argparse.Namespace) -> int:
     # the same reading as deform and batch: mesh, optional weld, handles and r mapped onto it
     inputs = load_job_inputs(
         DeformJob(mesh=args.mesh, handles=args.handles, transform=args.transform,
-                  rings_file=args.rings_file, weld=args.weld),
+                  rings_file=args.rings_file, weld=args.weld, neighbours=args.neighbours,
+                  radius=args.radius),
         note=lambda msg: note(msg, args.quiet))
     mesh, hs = inputs.mesh, inputs.handles
     rings_map = inputs.rings if args.rings_file else None
     if args.dry_run:
         return _dry_run(args, mesh, hs, out)
     if args.volumetric:
+        from arapkit.methods.deformer import check_domain
         from arapkit.methods.volumetric import check_closed
 
+        check_domain(mesh, volumetric=True)  # a point cloud has no volume to fill
         check_closed(mesh)  # refuse an open surface before any method runs
+    if mesh.faces is None:
+        from arapkit.methods.registry import methods
+
+        skipped = [m.name for m in methods("compare") if not m.applies_to(False)]
+        if skipped:
+            note(f"{args.mesh}: a point cloud: {', '.join(skipped)} need(s) a triangle mesh "
+                 "and did not run", args.quiet)
 
     def progress(label: str) -> Progress:
         return Progress(disable=args.quiet, desc=label)
@@ -151,7 +168,7 @@ def run(args: argparse.Namespace) -> int:
         if not r.result.converged:
             note(f"{r.label}: stopped after {r.result.iterations} iterations without "
                  "converging (raise --max-iter)", args.quiet)
-        for line in save_mesh(out / f"{_slug(r.label)}.ply", r.result.vertices,
+        for line in save_mesh(out / f"{_slug(r.label)}.ply", r.result,
                               vertex_properties={"energy": r.result.vertex_energy}, like=mesh):
             warn(line)
     rows = comparison_rows(runs)

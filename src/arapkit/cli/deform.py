@@ -17,10 +17,12 @@ from typing import Any
 
 import numpy as np
 
+from arapkit.arap.domains import all_weight_kinds
 from arapkit.cli.common import (
     Progress,
     RingProgress,
     add_example_epilog,
+    add_graph_options,
     add_view_options,
     add_weld_option,
     iteration_cap,
@@ -31,7 +33,8 @@ from arapkit.cli.common import (
     warn,
 )
 from arapkit.errors import InputError, require_extra, worded_for
-from arapkit.io.formats import readable_formats
+from arapkit.io.clouds import shape_formats_text
+from arapkit.mesh.cloud_weights import CLOUD_WEIGHT_KINDS, DEFAULT_CLOUD_WEIGHTS
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 
 __all__ = ["add_parser", "run"]
@@ -60,7 +63,9 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "stdout; progress and notes go to stderr.",
         **add_example_epilog(EXAMPLES),
     )
-    p.add_argument("mesh", metavar="MESH", help=f"input mesh ({readable_formats()}; may be .gz)")
+    p.add_argument("mesh", metavar="MESH",
+                   help=f"input mesh or point cloud ({shape_formats_text()}; text formats "
+                   "may be .gz); a file without faces is a point cloud (docs/clouds.md)")
     p.add_argument(
         "--handles",
         "-H",
@@ -97,13 +102,14 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "the handle files' selectors and \"rigid\": true|false, a per-vertex id file (.npy "
         "or text: libigl's G, -1 for none), or PLY vertex properties 'part'/'group'",
     )
-    kinds = WEIGHT_KINDS
     p.add_argument(
         "--weights",
-        default=DEFAULT_WEIGHTS,
-        choices=kinds,
-        help=f"edge weights: {', '.join(kinds)} (default {DEFAULT_WEIGHTS})",
+        default=None,
+        choices=all_weight_kinds(),
+        help=f"edge weights: on a mesh {', '.join(WEIGHT_KINDS)} (default {DEFAULT_WEIGHTS}); "
+        f"on a point cloud {', '.join(CLOUD_WEIGHT_KINDS)} (default {DEFAULT_CLOUD_WEIGHTS})",
     )
+    add_graph_options(p)
     p.add_argument(
         "--energy",
         default="rring",
@@ -257,7 +263,8 @@ def _check_volume_options(args: argparse.Namespace, inputs: list) -> Path | None
 
 def _check_outputs(args: argparse.Namespace) -> None:
     """Fail fast, before loading or solving, on any output that cannot be written."""
-    from arapkit.io import check_figure_format, check_output_path, mesh_format
+    from arapkit.io import check_figure_format, check_output_path
+    from arapkit.io.clouds import check_shape_output
 
     inputs = [args.mesh, args.handles, args.transform, args.rings_file, args.groups]
     outs = []
@@ -265,7 +272,7 @@ def _check_outputs(args: argparse.Namespace) -> None:
         raise InputError("-o/--output OUT is required (only --dry-run writes no mesh)")
     if args.output is not None:
         check_output_path(args.output, inputs, args.force, "output")
-        mesh_format(args.output)
+        check_shape_output(args.output, args.mesh)
         outs.append(Path(args.output).resolve())
     if args.report and args.report != "-":
         check_output_path(args.report, inputs, args.force, "report")
@@ -298,6 +305,8 @@ def _job(args: argparse.Namespace, method: dict[str, Any]):
         max_iter=args.max_iter,
         init=args.init,
         weld=getattr(args, "weld", None),
+        neighbours=args.neighbours,
+        radius=args.radius,
         volumetric=args.volumetric,
         interior_density=args.interior_density,
         groups=args.groups,
@@ -318,7 +327,7 @@ def run(args: argparse.Namespace) -> int:
     if args.dry_run:
         inputs = load_job_inputs(job, note=tell)
         return _dry_run(args, inputs.mesh, inputs.handles, inputs.rings, inputs.groups)
-    if args.volumetric and args.weights != DEFAULT_WEIGHTS:
+    if args.volumetric and args.weights not in (None, DEFAULT_WEIGHTS):
         from arapkit.methods.volumetric import DEFAULT_VOLUME_WEIGHTS
 
         note(f"--weights {args.weights} applies to surface ARAP; the volume's edges use "
@@ -326,6 +335,10 @@ def run(args: argparse.Namespace) -> int:
     with RingProgress(disable=args.quiet):  # a large r's build shows its progress
         prepared = prepare_job(job, note=tell)
     mesh, hs = prepared.mesh, prepared.handles
+    if args.output is not None:  # now that the input is read: a mesh's or a cloud's format
+        from arapkit.io.clouds import check_shape_output
+
+        check_shape_output(args.output, mesh)
     with Progress(disable=args.quiet) as progress:
         res = prepared.solve(callback=progress)
     if not res.converged:
@@ -421,7 +434,8 @@ def _dry_run(args: argparse.Namespace, mesh, hs, rings, groups=None) -> int:
     from arapkit.workflows.jobs import describe_groups, describe_rings
 
     box = bounding_box(mesh.vertices)
-    print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices, box min "
+    kind = "mesh" if mesh.faces is not None else "point cloud"
+    print(f"{kind}: {args.mesh} ({mesh.n_vertices} vertices, box min "
           f"{_vec(box.min)} max {_vec(box.max)})")
     print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
     for line in describe_groups(mesh.vertices, hs):
@@ -455,7 +469,8 @@ def _print_summary(args, mesh, hs, res, wall: float, groups=None) -> None:
         + ("" if mesh.welded_from is None else
            f" (welded from the input's {mesh.welded_from.source.n_vertices}; the output "
            "has the input's vertices)"),
-        f"faces: {mesh.n_faces}",
+        f"faces: {mesh.n_faces}" if mesh.faces is not None else
+        f"graph: {mesh.graph_description}, {len(mesh.edges)} edges (a point cloud)",
         f"handles: {len(hs.indices)} in {len(hs.groups)} group(s)",
         *([f"groups: {groups.summary()}"] if groups is not None else []),
         f"method: {args.energy}",

@@ -53,7 +53,9 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
         **add_example_epilog(EXAMPLES),
     )
     p.add_argument(
-        "mesh", nargs="?", metavar="MESH", help="OBJ/PLY/OFF/STL mesh (default: the built-in bar)"
+        "mesh", nargs="?", metavar="MESH",
+        help="OBJ/PLY/OFF/STL mesh, or a point cloud (a PLY/OBJ/OFF without faces, .xyz, "
+        ".npy; docs/clouds.md) (default: the built-in bar)"
     )
     p.add_argument("--rings-file", metavar="R", help="per-vertex r (text, .npy or PLY 'rings')")
     p.add_argument(
@@ -117,10 +119,9 @@ def build_state(args: argparse.Namespace) -> Any:
     >>> [h.name for h in st.handles], int(st.rings[0])
     (['fixed end', 'free end'], 2)
     """
-    from arapkit import load_mesh
     from arapkit.editor.state import EditorState
     from arapkit.errors import InputError
-    from arapkit.io import load_handles, load_rings
+    from arapkit.io import load_handles, load_rings, load_shape
     from arapkit.validate import ring_size as ring_size_rule
 
     if args.session:
@@ -130,7 +131,11 @@ def build_state(args: argparse.Namespace) -> Any:
     elif args.mesh:
         from arapkit.cli.common import maybe_weld
 
-        mesh = maybe_weld(load_mesh(args.mesh), getattr(args, "weld", None))
+        shape = load_shape(args.mesh)  # a file without faces: a point cloud
+        if shape.faces is None and getattr(args, "weld", None) is not None:
+            raise InputError(f"{args.mesh}: --weld merges a mesh's split vertices; a point "
+                             "cloud has none")
+        mesh = maybe_weld(shape, getattr(args, "weld", None))
         st = EditorState(mesh, mesh_path=str(Path(args.mesh).resolve()))
     else:
         st = _bar_state()

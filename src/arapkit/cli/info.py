@@ -17,10 +17,10 @@ from typing import Any
 import numpy as np
 
 from arapkit.cli.common import add_example_epilog
-from arapkit.io import load_mesh
+from arapkit.io import load_shape
 from arapkit.io.formats import readable_formats
 
-__all__ = ["add_parser", "inspect_mesh", "run"]
+__all__ = ["add_parser", "inspect_cloud", "inspect_mesh", "run"]
 
 #: Triangles with a corner angle below this (degrees) count as near-degenerate.
 NEEDLE_DEGREES = 1.0
@@ -126,6 +126,55 @@ def inspect_mesh(mesh) -> dict[str, Any]:
     return facts
 
 
+def inspect_cloud(cloud) -> dict[str, Any]:
+    """Facts about a point cloud (``docs/clouds.md``) and what the deformer does with it.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from arapkit.mesh.cloud import PointCloud
+    >>> facts = inspect_cloud(PointCloud(np.random.default_rng(0).random((50, 3))))
+    >>> facts["points"], facts["graph"], facts["components"]
+    (50, 'kNN, k = 10', 1)
+    """
+    from arapkit.mesh.orientation import bounding_box, guess_up
+
+    box, up = bounding_box(cloud.vertices), guess_up(cloud.vertices)
+    sizes = np.bincount(cloud.component_labels, minlength=cloud.n_components)
+    attrs = cloud.attributes
+    props = sorted(attrs.vertex_properties) if attrs is not None else []
+    facts: dict[str, Any] = {
+        "file": cloud.name,
+        "points": cloud.n_vertices,
+        "graph": cloud.graph_description,
+        "edges": len(cloud.edges),
+        "mean_edge_length": cloud.mean_edge_length,
+        "components": cloud.n_components,
+        "largest_component_points": int(sizes.max()),
+        "isolated_points": len(cloud.unreferenced),
+        "normals": cloud.normals is not None,
+        "colours": attrs is not None and attrs.colors() is not None,
+        "properties": props,
+        "bounding_box_diagonal": cloud.bounding_box_diagonal,
+        "bounding_box_min": box.min.tolist(),
+        "bounding_box_max": box.max.tolist(),
+        "extents": box.extents.tolist(),
+        "up_axis_guess": up.axis,
+        "up_axis_confidence": up.confidence,
+        "up_axis_reason": up.reason,
+        "repairs_on_load": list(cloud.notes),
+    }
+    advice = [f"on load: {note}" for note in cloud.notes]
+    advice.append("a point cloud: solved on its graph with gaussian weights; r-ring ARAP and "
+                  "embedded deformation apply, the methods on triangles do not")
+    if cloud.n_components > 1:
+        advice.append(f"{cloud.n_components} connected parts of the graph: each part without "
+                      "a handle moves rigidly with the nearest part that has handles (raise "
+                      "--neighbours to join parts the graph leaves apart)")
+    facts["advice"] = advice
+    return facts
+
+
 def _advice(f: dict[str, Any]) -> list[str]:
     out = []
     for note in f["repairs_on_load"]:
@@ -175,7 +224,8 @@ def _advice(f: dict[str, Any]) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit info``; returns the exit status."""
-    facts = inspect_mesh(load_mesh(args.mesh))
+    shape = load_shape(args.mesh)  # a file without faces is a point cloud
+    facts = inspect_mesh(shape) if shape.faces is not None else inspect_cloud(shape)
     facts["file"] = args.mesh
     if args.json:
         from arapkit.io import to_jsonable

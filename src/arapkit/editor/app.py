@@ -35,9 +35,10 @@ import viser
 
 from arapkit import validate
 from arapkit.editor.files import MESH_SUFFIXES, FileActions, safe_stem
-from arapkit.editor.geometry import UP_AXES, framing_distance, raycast
+from arapkit.editor.geometry import UP_AXES, framing_distance, pick_point, raycast
 from arapkit.editor.groups import GROUP_COLORS, groups_legend_html
 from arapkit.editor.panels import HANDLE_COLOURS, MAX_R, VIEWS, Panels, next_step
+from arapkit.editor.points import SPLAT_SIZE, CloudNode, cloud_colors, splat_colors
 from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, PointerTools
 from arapkit.editor.views import (
@@ -91,8 +92,10 @@ def load_pointer_kernels() -> None:
     V = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]])
     F = np.array([[0, 1, 2]])
     raycast(V, F, np.array([0.2, 0.2, 1.0]), np.array([0.0, 0.0, -1.0]))
+    pick_point(V, np.array([0.2, 0.2, 1.0]), np.array([0.0, 0.0, -1.0]), 0.1)
     face_groups(F, np.zeros(3, dtype=np.int64), 1)
     connected_region(F, np.ones(3, dtype=bool), 0)
+    connected_region(F[:, :2], np.ones(3, dtype=bool), 0)  # a point cloud's edges
 
 
 def _vertex_spacing(mesh: Any) -> np.ndarray:
@@ -269,10 +272,15 @@ class EditorApp(Panels, PointerTools, FileActions):
             if self.proxy_node is not None:
                 self.proxy_node.remove()
             # a large mesh's preview draws this node (hidden until then; its faces are set
-            # when the proxy is known)
-            self.proxy_node = self.server.scene.add_mesh_simple(
-                "/mesh/preview", self.local32(V[:3]), np.array([[0, 1, 2]], np.uint32),
-                color=SHADED_COLOR, side="double", visible=False)
+            # when the proxy is known); a point cloud's preview is splats
+            if st.mesh.faces is None:
+                self.proxy_node = CloudNode(self.server.scene, "/mesh/preview",
+                                            self.local32(V[:3]), SHADED_COLOR,
+                                            SPLAT_SIZE * self.edge_length, visible=False)
+            else:
+                self.proxy_node = self.server.scene.add_mesh_simple(
+                    "/mesh/preview", self.local32(V[:3]), np.array([[0, 1, 2]], np.uint32),
+                    color=SHADED_COLOR, side="double", visible=False)
             self._proxy_of = None
             self.mesh_node = None  # made by rebuild_display (below), in the shaded view only
             self.quietly(self._choose_up)
@@ -332,7 +340,9 @@ class EditorApp(Panels, PointerTools, FileActions):
         """The panel's line about the loaded mesh (name, size, loader notes)."""
         m = self.state.mesh
         notes = "; ".join(getattr(m, "notes", [])[:3])
-        return (f"**{m.name}**: {m.n_vertices:,} vertices, {m.n_faces:,} faces"
+        size = (f"{m.n_faces:,} faces" if m.faces is not None else
+                f"a point cloud ({m.graph_description})")
+        return (f"**{m.name}**: {m.n_vertices:,} vertices, {size}"
                 + (f"  \n_{notes}_" if notes else ""))
 
     def redraw(self) -> None:
@@ -372,7 +382,9 @@ class EditorApp(Panels, PointerTools, FileActions):
                 labels = energy_labels(self.vertex_energy, vmax, len(colors))
                 legend = energy_legend_html(vmax, len(colors), floor,
                                             float(np.nanmax(self.vertex_energy, initial=0.0)))
-        if labels is None:
+        if st.mesh.faces is None:  # a point cloud: one node of splats in every view
+            self._show_cloud(V32, labels, colors)
+        elif labels is None:
             if self.mesh_node is None:
                 self.mesh_node = self.server.scene.add_mesh_simple(
                     "/mesh/shaded", V32, np.asarray(st.mesh.faces, np.uint32),
@@ -393,6 +405,18 @@ class EditorApp(Panels, PointerTools, FileActions):
                 self._groups.append((g.vertices, node))
         self.html_legend.content = legend
         self.bind_brush()
+
+    def _show_cloud(self, V32: np.ndarray, labels: np.ndarray | None, colors: Any) -> None:
+        """Draw a point cloud: the file's colours (or one colour), or the view's."""
+        rgb = (cloud_colors(self.state.mesh, SHADED_COLOR) if labels is None
+               else splat_colors(labels, colors))
+        if self.mesh_node is None:
+            self.mesh_node = CloudNode(self.server.scene, "/mesh/points", V32, rgb,
+                                       SPLAT_SIZE * self.edge_length)
+        else:
+            self.mesh_node.vertices = V32
+            self.mesh_node.colors = rgb
+            self.mesh_node.visible = True
 
     def _refresh_vertices(self, V: np.ndarray) -> None:
         """Send new positions only (a drag): the colour split stays as it is."""
@@ -422,7 +446,8 @@ class EditorApp(Panels, PointerTools, FileActions):
         node = self.proxy_node
         node.vertices = P32
         if self._proxy_of is not proxy_mesh:
-            node.faces = np.asarray(proxy_mesh.faces, np.uint32)
+            if proxy_mesh.faces is not None:  # a point cloud's proxy has its points only
+                node.faces = np.asarray(proxy_mesh.faces, np.uint32)
             self._proxy_of = proxy_mesh
         node.visible = True
         # the dots too: moving them would send 10^4-10^5 points a frame on a scan (more

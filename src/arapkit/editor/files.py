@@ -20,12 +20,14 @@ import numpy as np
 from arapkit import validate
 from arapkit.editor.state import EditorState
 from arapkit.errors import InputError
-from arapkit.io.formats import READ_FORMATS, is_readable_mesh, readable_formats
+from arapkit.io.clouds import CLOUD_READ_FORMATS, is_cloud_file, shape_formats_text
+from arapkit.io.formats import READ_FORMATS, is_readable_mesh
 
 __all__ = ["MESH_SUFFIXES", "FileActions", "human_size", "printable", "safe_stem",
            "upload_suffix"]
 
-MESH_SUFFIXES = tuple("." + f for f in READ_FORMATS)
+#: what "Open mesh" takes: meshes and point clouds (the XYZ family and .npy)
+MESH_SUFFIXES = tuple(dict.fromkeys("." + f for f in (*READ_FORMATS, *CLOUD_READ_FORMATS)))
 
 
 def safe_stem(name: str, default: str = "mesh") -> str:
@@ -198,14 +200,15 @@ class FileActions:
                 raise InputError(f"{name}: cannot read ({type(exc).__name__}: {exc})") from None
 
     def read_mesh_bytes(self, name: str, data: bytes) -> Any:
-        """The mesh of an uploaded file (``name`` only picks the format), or a one-line
-        refusal; nothing in the editor changes."""
-        from arapkit import load_mesh
+        """The mesh or point cloud of an uploaded file (``name`` only picks the format), or
+        a one-line refusal; nothing in the editor changes."""
+        from arapkit.io import load_shape
 
         self._check_upload(name, data, "meshes")
-        if not is_readable_mesh(name):
-            raise InputError(f"{name}: not a mesh file (use {readable_formats(' or ')})")
-        mesh = self._via_tempfile(name, data, load_mesh)
+        if not (is_readable_mesh(name) or is_cloud_file(name)):
+            raise InputError(f"{name}: not a mesh file or point cloud (use "
+                             f"{shape_formats_text()})")
+        mesh = self._via_tempfile(name, data, load_shape)  # a file without faces: a cloud
         mesh.name = safe_stem(name)
         return mesh
 

@@ -23,6 +23,7 @@ import numpy as np
 import viser
 
 from arapkit import validate
+from arapkit.arap.domains import domain_of
 from arapkit.editor.files import MESH_SUFFIXES
 from arapkit.editor.geometry import UP_AXES
 from arapkit.editor.groups import ERASE
@@ -270,11 +271,11 @@ class Panels:
         self._bind_panel_events()
 
     def _build_solver_panel(self, gui: Any) -> None:
-        from arapkit.mesh.weights import WEIGHT_KINDS
-
         s = self.state.settings
         self.dd_method = gui.add_dropdown("Method", tuple(c.label for c in solver_choices()))
-        self.dd_weights = gui.add_dropdown("Weights", WEIGHT_KINDS, initial_value=s.weights)
+        # the loaded shape's weightings (a point cloud has its own)
+        self.dd_weights = gui.add_dropdown("Weights", domain_of(self.state.mesh).weight_kinds,
+                                           initial_value=s.weights)
         self.nb_tol = gui.add_number("Tolerance", s.tol, min=1e-9, max=0.5, step=1e-6)
         self.nb_maxit = gui.add_number("Max iterations", s.max_iter, min=1, max=100000, step=1)
         self.nb_budget = gui.add_number("Live budget (ms)", s.live_budget_ms, min=1.0,
@@ -383,6 +384,9 @@ class Panels:
         values, counts = np.unique(st.rings, return_counts=True)
         self.sl_global.value = int(min(values[np.argmax(counts)], MAX_R))
         s = st.settings
+        # what the loaded shape takes: a point cloud has fewer methods and its own weights
+        self.dd_method.options = tuple(c.label for c in solver_choices(st.mesh.faces is not None))
+        self.dd_weights.options = domain_of(st.mesh).weight_kinds
         self.dd_method.value = s.label
         self.dd_weights.value = s.weights
         self.nb_tol.value, self.nb_maxit.value = s.tol, s.max_iter
@@ -555,7 +559,8 @@ class Panels:
 
     def _apply_settings(self) -> None:
         label = self.dd_method.value
-        choice = next((c for c in solver_choices() if c.label == label), None)
+        choice = next((c for c in solver_choices(self.state.mesh.faces is not None)
+                       if c.label == label), None)
         old = self.state.settings
         # the page's values pass the same rules as a session's (a client can send anything)
         s = SolverSettings.from_dict({

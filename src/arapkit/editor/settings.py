@@ -22,8 +22,9 @@ import dataclasses
 from typing import Any
 
 from arapkit import validate
+from arapkit.arap.domains import all_weight_kinds
 from arapkit.errors import InputError
-from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
+from arapkit.mesh.weights import DEFAULT_WEIGHTS
 from arapkit.methods.registry import MethodInfo, method, method_names, methods
 
 __all__ = ["METHODS", "MULTIRES_CHOICES", "SolverChoice", "SolverSettings", "multires_label",
@@ -66,15 +67,22 @@ class SolverChoice:
     volumetric: bool = False
 
 
-def solver_choices() -> tuple[SolverChoice, ...]:
+def solver_choices(has_faces: bool = True) -> tuple[SolverChoice, ...]:
     """The selector's entries: every editor method, then the volumetric form of those with one.
+
+    ``has_faces=False`` (a point cloud): only the methods that apply to it (the registry's
+    ``needs_faces``), and no volume.
 
     Examples
     --------
     >>> [c.label for c in solver_choices() if c.volumetric]
     ['volumetric r-ring ARAP']
+    >>> [c.method for c in solver_choices(has_faces=False)]
+    ['rring', 'embedded']
     """
-    offered = methods("editor")
+    offered = tuple(m for m in methods("editor") if m.applies_to(has_faces))
+    if not has_faces:
+        return tuple(SolverChoice(m.label, m.name) for m in offered)
     return (*(SolverChoice(m.label, m.name) for m in offered),
             *(SolverChoice(f"volumetric {m.label}", m.name, True) for m in offered
               if m.volumetric))
@@ -164,9 +172,10 @@ class SolverSettings:
                              f"{s.multires!r:.40}")
         if s.volumetric and not s.info.volumetric:
             raise InputError(f"session solver: method {s.method!r} has no volumetric form")
-        if not isinstance(s.weights, str) or s.weights not in WEIGHT_KINDS:
+        kinds = all_weight_kinds()  # a mesh's or a point cloud's
+        if not isinstance(s.weights, str) or s.weights not in kinds:
             raise InputError(f"session solver: weights {s.weights!r:.40}: expected one of "
-                             f"{', '.join(WEIGHT_KINDS)}")
+                             f"{', '.join(kinds)}")
         s.tol = validate.tolerance(s.tol, "session solver: tol")
         s.max_iter = validate.iteration_cap(s.max_iter, "session solver: max_iter")
         s.live_max_iter = validate.iteration_cap(s.live_max_iter, "session solver: live_max_iter")

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from arapkit import validate
+from arapkit.arap.domains import domain_of
 from arapkit.editor import session as session_file
 from arapkit.editor.geometry import (  # raycast, quat_to_matrix: kept at their old path
     CameraView,
@@ -99,7 +100,8 @@ class EditorState:
         self.groups = PaintedGroups.empty(self.n)
         self.handles: list[Handle] = []
         self.selection = np.zeros(0, dtype=np.int64)
-        self.settings = SolverSettings()
+        # the shape's own weighting: a point cloud's kinds are not a mesh's
+        self.settings = SolverSettings(weights=domain_of(mesh).default_weights)
         self._undo: list[_Snapshot] = []
         self._redo: list[_Snapshot] = []
         self._name_counter = 0
@@ -213,8 +215,9 @@ class EditorState:
         ``front_only`` keeps only the vertices facing the camera (see
         :func:`arapkit.editor.geometry.in_screen_rect`).
         """
-        inside = in_screen_rect(camera, self.vertices, np.asarray(self.mesh.faces), screen_min,
-                                screen_max, front_only)
+        faces = self.mesh.faces  # None for a point cloud: no facing test
+        inside = in_screen_rect(camera, self.vertices, None if faces is None else
+                                np.asarray(faces), screen_min, screen_max, front_only)
         return self._combine(np.flatnonzero(inside), mode)
 
     def clear_selection(self) -> None:
@@ -398,7 +401,9 @@ class EditorState:
         """Vertices reachable from ``seed`` through edges whose ends both have its ``r``."""
         if not 0 <= seed < self.n:
             raise InputError(f"flood fill: vertex {seed} out of range 0..{self.n - 1}")
-        return connected_region(self.mesh.faces, self.rings == self.rings[seed], seed)
+        # a point cloud links its points by its graph's edges
+        links = self.mesh.faces if self.mesh.faces is not None else self.mesh.edges
+        return connected_region(links, self.rings == self.rings[seed], seed)
 
     def _assign(self, idx: np.ndarray, r: int, record: bool) -> int:
         r = validate.ring_size(r, "paint r")
@@ -518,7 +523,7 @@ class EditorState:
     @classmethod
     def from_session(cls, path: str | os.PathLike[str]) -> EditorState:
         """Load the mesh named in a session file (relative to the file) and apply it."""
-        from arapkit import load_mesh
+        from arapkit.io import load_shape
 
         d = cls.read_session(path)
         mesh_path = d.get("mesh")
@@ -527,7 +532,7 @@ class EditorState:
         if not isinstance(mesh_path, str) or "\0" in mesh_path:
             raise InputError(f"{path}: 'mesh' must be a file name, got {mesh_path!r:.60}")
         mesh_file = Path(path).parent / mesh_path
-        mesh = load_mesh(str(mesh_file))
+        mesh = load_shape(str(mesh_file))  # a mesh, or a point cloud
         if d.get("weld") is not None:
             from arapkit.mesh.welding import weld
 

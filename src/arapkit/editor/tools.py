@@ -33,8 +33,9 @@ from typing import Any
 
 import numpy as np
 
-from arapkit.editor.geometry import CameraView, nearest_corner, raycast
+from arapkit.editor.geometry import CameraView, nearest_corner, pick_point, raycast
 from arapkit.editor.groups import GROUP_COLORS
+from arapkit.editor.points import SPLAT_SIZE
 from arapkit.editor.state import EditorState
 from arapkit.editor.views import RING_COLORS, SHADED_COLOR, ring_labels
 from arapkit.errors import InputError, worded_for
@@ -279,10 +280,13 @@ class PointerTools:
     def _on_click_add(self, event: Any) -> None:
         self._on_click(event, add=True)
 
-    def _hit(self, origin: Any, direction: Any) -> tuple[int, np.ndarray] | None:
+    def _hit(self, origin: Any, direction: Any) -> tuple[int | None, np.ndarray] | None:
         st = self.state
-        return raycast(st.vertices, np.asarray(st.mesh.faces), np.asarray(origin, np.float64),
-                       np.asarray(direction, np.float64))
+        o, d = np.asarray(origin, np.float64), np.asarray(direction, np.float64)
+        if st.mesh.faces is None:  # a point cloud: the splat under the pointer (no face)
+            hit = pick_point(st.vertices, o, d, SPLAT_SIZE * self.edge_length)
+            return None if hit is None else (None, hit[1])
+        return raycast(st.vertices, np.asarray(st.mesh.faces), o, d)
 
     def _on_click(self, event: Any, add: bool) -> None:
         try:

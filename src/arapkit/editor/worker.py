@@ -58,13 +58,14 @@ from typing import Any
 
 import numpy as np
 
+from arapkit.arap.domains import domain_of
 from arapkit.arap.rings import BuildCancelled, ring_progress
 from arapkit.editor.motion import SecondaryMotion
 from arapkit.editor.settings import SolverSettings
 from arapkit.errors import worded_for
 from arapkit.mesh.weights import DEFAULT_WEIGHTS, WEIGHT_KINDS
 from arapkit.methods.deformer import coarse_to_fine
-from arapkit.methods.multires import MultiresDeformer, start_decimation
+from arapkit.methods.multires import DEFAULT_PROXY_VERTICES, MultiresDeformer, coarsening_of
 
 LAPLACIAN_WEIGHTS = WEIGHT_KINDS
 #: one preview chunk: proxy iterations run for about this long before a shape is sent;
@@ -156,14 +157,17 @@ def _build(req: SolveRequest, rings: Any, s: SolverSettings) -> Any:
     """The deformer the settings ask for: coarse to fine, volumetric or plain."""
     from arapkit import Deformer
 
+    # a weighting the shape does not take (a mesh's kind on a point cloud, from a session
+    # or the defaults) gives way to the shape's own: the panel offers the shape's kinds
+    weights = s.weights if s.weights in domain_of(req.mesh).weight_kinds else None
     groups = _groups_for(req)
     if _coarse_to_fine(req.mesh, s, groups):
         # the proxy previews at once; the full factor is built in the background once the
         # first preview is out (started earlier, it competes with that preview)
-        return MultiresDeformer(req.mesh, req.handles, rings, s.weights, energy=s.method,
+        return MultiresDeformer(req.mesh, req.handles, rings, weights, energy=s.method,
                                 tol=s.tol, max_iter=s.max_iter)
     # chosen above: not again by size
-    return Deformer(req.mesh, req.handles, rings=rings, energy=s.method, weights=s.weights,
+    return Deformer(req.mesh, req.handles, rings=rings, energy=s.method, weights=weights,
                     tol=s.tol, max_iter=s.max_iter, multires=False,
                     **({"volumetric": True} if s.volumetric else {}),
                     **({} if groups is None else {"groups": groups}))
@@ -283,7 +287,7 @@ class SolveWorker:
         """
         try:
             if _coarse_to_fine(mesh, settings):
-                start_decimation(mesh)
+                coarsening_of(mesh).start(mesh, DEFAULT_PROXY_VERTICES)
         except Exception:  # an early start only: the solve itself reports any problem
             pass
 

@@ -8,6 +8,8 @@ Modules
 -------
 formats   the readable, writable and figure formats (one list each)
 readers   :func:`load_mesh`, :func:`read_ply_vertex_properties`
+clouds    :func:`load_points` (files without faces), :func:`load_shape` (mesh or cloud)
+cloud_writer  :func:`save_points` (a cloud with its normals, colours and properties)
 ply       the PLY format read whole (:func:`read_ply`: every element, property and list)
 writers   :func:`save_mesh` (plain, or with everything the source carried)
 atomic    atomic output, output-path checks, strict JSON
@@ -38,6 +40,8 @@ from ..mesh.selection import (
 )
 from .arrays import load_numpy
 from .atomic import atomic_open, atomic_write, check_output_path, to_jsonable, write_json
+from .cloud_writer import CLOUD_WRITE_FORMATS, save_points
+from .clouds import CLOUD_READ_FORMATS, load_points, load_shape
 from .formats import (
     FIGURE_FORMATS,
     MESH_FORMATS,
@@ -66,6 +70,8 @@ from .text import int_tokens, read_text, text_tokens
 from .writers import ply_property_column, save_mesh, write_with_attributes
 
 __all__ = [
+    "CLOUD_READ_FORMATS",
+    "CLOUD_WRITE_FORMATS",
     "COMMENT_KEY",
     "FIGURE_FORMATS",
     "GROUP_KEYS",
@@ -89,8 +95,10 @@ __all__ = [
     "load_handles",
     "load_mesh",
     "load_numpy",
+    "load_points",
     "load_rings",
     "load_sel",
+    "load_shape",
     "mesh_format",
     "parse_groups",
     "parse_handles",
@@ -104,6 +112,7 @@ __all__ = [
     "save_groups",
     "save_handles",
     "save_mesh",
+    "save_points",
     "save_rings",
     "save_sel",
     "select_box",

@@ -29,7 +29,8 @@ from ..mesh.model import Mesh, scale_free_vertices
 from .formats import READ_FORMATS, readable_formats
 from .ply import PlyFile, PlyList, read_ply
 
-__all__ = ["load_mesh", "read_ply_vertex_properties"]
+__all__ = ["PARTS_FORMATS", "load_mesh", "mesh_from_parts", "read_file", "read_parts",
+           "read_ply_vertex_properties"]
 
 
 def _read_bytes(path: str) -> tuple[bytes, str]:
@@ -184,11 +185,13 @@ def _obj_index(tok: str, count: int, what: str, path: str, lineno: int) -> int:
     return i - 1
 
 
-def _parse_obj(text: str, path: str) -> tuple[np.ndarray, np.ndarray | list, MeshAttributes]:
+def _parse_obj(text: str, path: str, faces_required: bool = True
+               ) -> tuple[np.ndarray, np.ndarray | list, MeshAttributes]:
     """OBJ reader that keeps vertex order and everything else the file says.
 
     Texture seams are not split: a position is one vertex whatever ``vt`` its corners
-    use, and the corner -> ``vt`` / ``vn`` tables are kept in the attributes.
+    use, and the corner -> ``vt`` / ``vn`` tables are kept in the attributes. Without
+    ``faces_required`` a file of ``v`` lines only is read (a point cloud).
     """
     verts: list[list[str]] = []
     vlines: list[int] = []
@@ -235,9 +238,11 @@ def _parse_obj(text: str, path: str) -> tuple[np.ndarray, np.ndarray | list, Mes
         elif key not in _OBJ_GEOMETRY:
             elements += key in ("l", "p")
             statements.append((len(sizes), raw.strip()))
-    if not sizes:
+    if not sizes and faces_required:
         what = (f"only line/point elements ({elements})" if elements else "no 'f' lines")
         raise InputError(f"{path}: no faces: the file has {what}; arapkit deforms surfaces")
+    if not verts:
+        raise InputError(f"{path}: no vertices ('v' lines)")
     C = np.asarray(corners, dtype=np.int64)
     bad = np.flatnonzero(C >= len(verts))
     if len(bad):
@@ -283,6 +288,8 @@ def _parse_obj(text: str, path: str) -> tuple[np.ndarray, np.ndarray | list, Mes
             attrs.normals, attrs.corner_normal = arr, ix
     sizes_a = attrs.face_sizes
     faces = C.reshape(-1, 3) if np.all(sizes_a == 3) else attrs.polygons()
+    if not len(sizes_a):
+        faces = np.zeros((0, 3), dtype=np.int64)
     return np.ascontiguousarray(V[:, :3]), faces, attrs
 
 
@@ -314,8 +321,10 @@ def _load_with_trimesh(data: bytes, ext: str, path: str):
     return m
 
 
-def _ply_parts(ply: PlyFile, path: str) -> tuple[np.ndarray, np.ndarray | list, MeshAttributes]:
-    """Positions, faces (file order) and attributes of a read PLY file."""
+def _ply_parts(ply: PlyFile, path: str, faces_required: bool = True
+               ) -> tuple[np.ndarray, np.ndarray | list, MeshAttributes]:
+    """Positions, faces (file order) and attributes of a read PLY file (without
+    ``faces_required``: no faces where it has no face element, or an empty one)."""
     vertex = ply.elements.get("vertex")
     vcols = dict(vertex.data) if vertex is not None else {}
     if not all(isinstance(vcols.get(c), np.ndarray) for c in "xyz"):
@@ -326,16 +335,22 @@ def _ply_parts(ply: PlyFile, path: str) -> tuple[np.ndarray, np.ndarray | list, 
     fcols = dict(face.data) if face is not None else {}
     key = next((k for k in ("vertex_indices", "vertex_index")
                 if isinstance(fcols.get(k), PlyList)), None)
-    if key is None:
+    if key is None and faces_required:
         raise InputError(f"{path}: no faces (PLY has no face element with vertex_indices)")
-    if face.count == 0:
+    if key is not None and face.count == 0 and faces_required:
         raise InputError(f"{path}: no faces (the PLY face element is empty)")
     # an empty element loses nothing; one with records is not written back
     lost = [f"PLY element '{e}'" for e, el in ply.elements.items()
             if e not in ("vertex", "face") and el.count]
-    idx = fcols.pop(key)
+    if key is None:  # a point cloud: a face element without indices is not written back
+        if face is not None and face.count:
+            lost.append("PLY element 'face' (no vertex_indices)")
+        fcols = {}
+        idx = PlyList(np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64))
+    else:
+        idx = fcols.pop(key)
     sizes, corners = idx.sizes.astype(np.int64), idx.values.astype(np.int64)
-    if np.all(sizes == 3):
+    if np.all(sizes == 3):  # no faces too: a (0, 3) array
         faces: np.ndarray | list = corners.reshape(-1, 3)
     else:
         # lists of Python ints: what the Mesh's polygon checks walk fastest (3x np.split's)
@@ -389,6 +404,56 @@ def load_mesh(path: str | os.PathLike) -> Mesh:
     except (ValueError, IndexError, KeyError, EOFError, UnicodeDecodeError, OverflowError) as e:
         # a parser tripping over a malformed file means the file is bad, not arapkit
         raise InputError(f"{path}: cannot read mesh ({type(e).__name__}: {e})") from None
+
+
+#: the formats :func:`read_parts` reads (a file of these may have no faces)
+PARTS_FORMATS = ("off", "obj", "ply")
+
+
+def read_file(path: str | os.PathLike) -> tuple[bytes, str]:
+    """The bytes of a file (gunzipped for ``.gz``) and its format's extension, lower case;
+    a one-line InputError for a missing, folder or unreadable file.
+
+    Examples
+    --------
+    >>> read_file("no/such/file.ply")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: no/such/file.ply: no such file
+    """
+    return _read_bytes(os.fspath(path))
+
+
+def read_parts(data: bytes, ext: str, path: str, faces_required: bool = True
+               ) -> tuple[np.ndarray, np.ndarray | list, MeshAttributes]:
+    """Positions, faces (file order; (0, 3) where there are none and ``faces_required`` is
+    False) and attributes of an OFF, OBJ or PLY file's bytes, unchecked by :class:`Mesh`.
+
+    Examples
+    --------
+    >>> V, F, a = read_parts(b"OFF\\n2 0 0\\n0 0 0\\n1 0 0\\n", "off", "two.off", False)
+    >>> V.shape, len(F), a.source_format
+    ((2, 3), 0, 'off')
+    """
+    try:
+        if ext == "ply":
+            return _ply_parts(read_ply(data, path), path, faces_required)
+        text = data.decode("utf-8", "replace")
+        if ext == "off":
+            V, F, attrs = _parse_off(text, path)
+            if faces_required and not len(F):
+                raise InputError(f"{path}: mesh has no faces")
+            return V, (F if len(F) else np.zeros((0, 3), dtype=np.int64)), attrs
+        return _parse_obj(text, path, faces_required)
+    except InputError:
+        raise
+    except (ValueError, IndexError, KeyError, EOFError, UnicodeDecodeError, OverflowError) as e:
+        raise InputError(f"{path}: cannot read ({type(e).__name__}: {e})") from None
+
+
+def mesh_from_parts(V, F, name: str, attrs: MeshAttributes) -> Mesh:
+    """The :class:`Mesh` :func:`load_mesh` makes of a file's parts (notes included)."""
+    return _mesh_with_attributes(V, F, name, attrs)
 
 
 def _parse_mesh(data: bytes, ext: str, path: str) -> Mesh:

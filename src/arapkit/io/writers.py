@@ -40,6 +40,7 @@ from ..mesh.attributes import MeshAttributes, recompute_normals
 from ..mesh.model import Mesh, faces_of
 from ..validate import positions_of
 from .atomic import atomic_write
+from .cloud_writer import save_points
 from .formats import mesh_format
 
 __all__ = ["ply_property_column", "save_mesh", "write_with_attributes"]
@@ -352,13 +353,17 @@ def save_mesh(
     vertex_properties : dict of name -> (n,) array, optional
         Extra per-vertex values (``energy``, ``rings`` ...). Only PLY stores them; other
         formats drop them because they have no place for them.
-    like : Mesh, optional
-        The mesh ``vertices`` belong to (the loaded input, or a mesh made by
-        :func:`arapkit.mesh.welding.weld`, whose values are then written to the input's own
-        vertices). Everything its file carried is written again: the original polygons
-        (also faces dropped as degenerate), UVs with their seams, normals recomputed
-        from ``vertices``, OBJ materials and groups, colours, PLY properties. See
-        ``docs/io.md`` for what each format keeps.
+    like : Mesh or PointCloud, optional
+        A point cloud (or ``save_mesh(path, cloud)``) is written as one, with its normals
+        turned by a :class:`~arapkit.Result`'s rotations, its colours and properties
+        (:func:`arapkit.io.cloud_writer.save_points`: ``.ply``, ``.obj``, ``.off``,
+        ``.xyz``, ``.xyzn``, ``.xyzrgb``, ``.npy``). A mesh: the mesh ``vertices`` belong
+        to (the loaded input, or a mesh made by :func:`arapkit.mesh.welding.weld`, whose
+        values are then written to the input's own vertices). Everything its file
+        carried is written again: the original polygons (also faces dropped as
+        degenerate), UVs with their seams, normals recomputed from ``vertices``, OBJ
+        materials and groups, colours, PLY properties. See ``docs/io.md`` for what each
+        format keeps.
 
     Returns
     -------
@@ -375,6 +380,10 @@ def save_mesh(
     >>> p.read_text().splitlines()[0]
     'OFF'
     """
+    cloud = like if like is not None else vertices
+    if faces is None and getattr(cloud, "faces", 0) is None and hasattr(cloud, "points"):
+        # a point cloud (like=cloud, or the cloud itself): its own formats and attributes
+        return save_points(path, vertices, like=cloud, vertex_properties=vertex_properties)
     fmt, gz = mesh_format(path)
     if faces is None and like is None:
         # save_mesh(path, mesh): a Mesh writes what its file carried, another library's

@@ -1,4 +1,5 @@
-"""What a shape is: the triangle mesh model, its edge graph, weights, welding and quality.
+"""What a shape is: the triangle mesh model, point clouds and graphs, edge graphs, weights,
+welding and quality.
 
 Files are read and written by :mod:`arapkit.io` (one layer up). ``from arapkit.mesh import
 load_mesh`` still works for one release, with a :class:`DeprecationWarning`.
@@ -14,6 +15,7 @@ import importlib
 import warnings
 from typing import Any
 
+from .cloud import Graph, PointCloud, as_shape
 from .model import (
     COORDINATE_RANGE,
     EdgeTopology,
@@ -24,8 +26,8 @@ from .model import (
 )
 from .welding import weld
 
-__all__ = ["COORDINATE_RANGE", "EdgeTopology", "Mesh", "bounding_box_diagonal",
-           "check_number_range", "scale_free_vertices", "weld"]
+__all__ = ["COORDINATE_RANGE", "EdgeTopology", "Graph", "Mesh", "PointCloud", "as_shape",
+           "bounding_box_diagonal", "check_number_range", "scale_free_vertices", "weld"]
 
 #: names the flat ``arapkit.mesh`` module had that now live in a higher layer
 _MOVED_UP = {"load_mesh": "arapkit.io.readers"}

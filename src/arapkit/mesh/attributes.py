@@ -34,7 +34,8 @@ class MeshAttributes:
     Attributes
     ----------
     source_format : str
-        ``"obj"``, ``"ply"``, ``"off"`` or ``"stl"``.
+        ``"obj"``, ``"ply"``, ``"off"`` or ``"stl"``; for a point cloud also ``"xyz"``,
+        ``"xyzn"``, ``"xyzrgb"`` or ``"npy"`` (no faces: ``face_sizes`` is empty).
     face_sizes : (k,) int
         Number of corners of every face of the file, in file order (faces the
         :class:`~arapkit.Mesh` dropped as degenerate included).
@@ -110,8 +111,10 @@ class MeshAttributes:
             names = ["red", "green", "blue"] + (["alpha"] if "alpha" in p else [])
             cols = np.stack([np.asarray(p[c], dtype=np.float64) for c in names], axis=1)
             return cols / 255.0 if p["red"].dtype.kind in "iu" else cols
-        # OFF says by its keyword (COFF, CNOFF ...) whether the numbers are colours
-        off_colour = self.source_format != "off" or "C" in self.off_keyword[:-3]
+        # OFF says by its keyword (COFF, CNOFF ...) whether the numbers are colours; the
+        # numbers of a point cloud's text rows (.xyz) are not taken for colours
+        off_colour = self.source_format == "obj" or (
+            self.source_format == "off" and "C" in self.off_keyword[:-3])
         if off_colour and self.vertex_extra is not None and self.vertex_extra.shape[1] in (3, 4):
             # OBJ colours are 0..1; OFF files often use 0..255
             big = self.vertex_extra.size and float(np.max(self.vertex_extra)) > 1.0

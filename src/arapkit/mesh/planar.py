@@ -110,6 +110,28 @@ class PlanarInput:
         return cls._of_mesh(as_mesh(value, what), 3)
 
     @classmethod
+    def of_shape(cls, value, what: str = "mesh") -> PlanarInput:
+        """As :meth:`of`, and a point cloud or graph too (anything
+        :func:`~arapkit.mesh.cloud.as_shape` reads as one): ``mesh`` is then the cloud,
+        never planar (it has no triangles for the plane's flip guard, so it is solved in
+        3D).
+
+        Examples
+        --------
+        >>> s = PlanarInput.of_shape(np.eye(3))
+        >>> type(s.mesh).__name__, s.planar, s.given_dim
+        ('PointCloud', False, 3)
+        """
+        from .cloud import PointCloud, as_shape
+
+        if isinstance(value, (Mesh, tuple, list)) or faces_of(value) is not None:
+            return cls.of(value, what)
+        shape = as_shape(value, what)
+        if isinstance(shape, PointCloud):
+            return cls(shape, 3, False, 0.0)  # type: ignore[arg-type]
+        return cls.of(shape, what)
+
+    @classmethod
     def _of_mesh(cls, mesh: Mesh, given_dim: int) -> PlanarInput:
         planar = is_planar(mesh.vertices)
         return cls(mesh, given_dim, planar, float(mesh.vertices[0, 2]) if planar else 0.0)

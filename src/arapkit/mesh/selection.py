@@ -110,7 +110,8 @@ class HandleSet:
 
 
 def connected_region(faces: np.ndarray, mask: np.ndarray, seed: int) -> np.ndarray:
-    """Vertices reachable from ``seed`` along face edges whose two ends are in ``mask``.
+    """Vertices reachable from ``seed`` along face edges whose two ends are in ``mask``
+    (``faces`` may be an (m, 2) edge list: a point cloud's graph).
 
     The paint bucket's region (``mask``: the vertices with the seed's r), sorted; empty
     when ``seed`` is not in ``mask``. One pass of union-find over the faces' edges: no edge
@@ -134,9 +135,10 @@ def _reach(F, mask, seed):  # pragma: no cover - compiled
     """Union-find over the edges with both ends in ``mask``; then seed's set, in ``mask``."""
     n = mask.shape[0]
     parent = np.arange(n)
+    k = F.shape[1]  # triangles, or a point cloud's edges (k = 2)
     for f in range(F.shape[0]):
-        for c in range(3):
-            a, b = F[f, c], F[f, (c + 1) % 3]
+        for c in range(k if k > 2 else 1):
+            a, b = F[f, c], F[f, (c + 1) % k]
             if mask[a] and mask[b]:
                 ra, rb = union_root(parent, a), union_root(parent, b)
                 if ra != rb:

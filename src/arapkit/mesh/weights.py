@@ -44,6 +44,7 @@ __all__ = [
     "SOUND_WEIGHTS",
     "COT_CAP",
     "edge_weights",
+    "given_weights",
     "corner_cotangents",
     "cotangent_weights",
     "voronoi_areas",
@@ -153,7 +154,7 @@ def edge_weights(mesh: Mesh, kind: str | np.ndarray = DEFAULT_WEIGHTS) -> np.nda
     [2.0, 2.0]
     """
     if not isinstance(kind, str):
-        return _given_weights(mesh, kind)
+        return given_weights(mesh, kind)
     if kind == "uniform":
         return np.ones(len(mesh.edges))
     if kind not in WEIGHT_KINDS:
@@ -165,8 +166,16 @@ def edge_weights(mesh: Mesh, kind: str | np.ndarray = DEFAULT_WEIGHTS) -> np.nda
     return w
 
 
-def _given_weights(mesh: Mesh, w) -> np.ndarray:
-    """Validate explicit per-edge weights: one per edge of ``mesh.edges``, finite, > 0."""
+def given_weights(mesh: Mesh, w) -> np.ndarray:
+    """Validate explicit per-edge weights: one per edge of ``mesh.edges``, finite, > 0
+    (``mesh``: anything with ``edges`` and ``name``, a point cloud's graph too).
+
+    Examples
+    --------
+    >>> from arapkit import Mesh
+    >>> given_weights(Mesh(np.eye(3), [[0, 1, 2]]), [1, 2, 3]).tolist()
+    [1.0, 2.0, 3.0]
+    """
     try:
         w = np.array(w, dtype=np.float64)
     except (TypeError, ValueError):
@@ -180,7 +189,7 @@ def _given_weights(mesh: Mesh, w) -> np.ndarray:
     if len(bad):
         i, j = mesh.edges[bad[0]]
         raise InputError(
-            f"{mesh.name}: weight of edge {bad[0]} ({i}, {j}) is {w[bad[0]]!r}; explicit "
+            f"{mesh.name}: weight of edge {bad[0]} ({i}, {j}) is {float(w[bad[0]])!r}; explicit "
             "weights must be finite and > 0"
         )
     return w

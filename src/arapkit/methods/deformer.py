@@ -36,19 +36,22 @@ import numpy as np
 
 from ..arap.backends import DEVICES, check_device, make_backend  # noqa: F401 - DEVICES: what device= takes
 from ..arap.constraints import CholeskyFactor, anchor_components, check_handles, check_targets
+from ..arap.domains import domain_of
 from ..arap.energies.rring import check_ring_scale
 from ..arap.graph import bandwidth_order, unit_scale
 from ..arap.loop import Result, local_global, start_energy, with_progress
 from ..arap.problem import ARAPProblem
 from ..arap.rings import Neighbourhoods, check_rings
 from ..errors import Advice, InputError
+from ..mesh.cloud import PointCloud
 from ..mesh.model import Mesh
 from ..mesh.planar import PlanarInput
-from ..mesh.weights import DEFAULT_WEIGHTS, SOUND_WEIGHTS
+from ..mesh.weights import SOUND_WEIGHTS
 from ..validate import integer, iteration_cap, real_array, tolerance
 from .dispatch import (
     INITS,
     MULTIRES_AUTO_VERTICES,
+    check_domain,
     check_method,
     coarse_to_fine,
     refuse_acceleration,
@@ -61,8 +64,8 @@ from .registry import method
 
 # the method choice moved to .dispatch; its names stay importable from here
 __all__ = ["INITS", "MULTIRES_AUTO_VERTICES", "Deformer", "Result", "check_handles",
-           "anchor_components", "CholeskyFactor", "bandwidth_order", "check_method",
-           "coarse_to_fine", "register_variant", "unit_scale"]
+           "anchor_components", "CholeskyFactor", "bandwidth_order", "check_domain",
+           "check_method", "coarse_to_fine", "register_variant", "unit_scale"]
 
 
 def _rows(ptr: np.ndarray, order: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -89,9 +92,12 @@ class Deformer:
 
     Parameters
     ----------
-    mesh : Mesh, a (vertices, faces) pair, or a trimesh.Trimesh
-        The surface (:func:`arapkit.mesh.model.as_mesh`); a pair may hold ``(n, 2)``
-        positions (a planar shape, solved in 2D).
+    mesh : Mesh, PointCloud, Graph, a (vertices, faces) pair, a trimesh.Trimesh, or points
+        The shape (:func:`arapkit.mesh.cloud.as_shape`): a triangle mesh (a pair may hold
+        ``(n, 2)`` positions: a planar shape, solved in 2D), or a point cloud (an
+        :class:`arapkit.PointCloud`, an ``(n, 3)`` array, an Open3D or trimesh point
+        cloud) solved on its neighbourhood graph, or an :class:`arapkit.Graph` of your
+        own edges. Methods defined on triangles refuse a point cloud (``docs/clouds.md``).
     handles : (h,) int, (n,) bool, or a HandleSet
         Vertices with positional constraints (a mask selects its True vertices; a
         :func:`arapkit.load_handles` set stands for its indices).
@@ -99,8 +105,12 @@ class Deformer:
         Neighbourhood size r per vertex (1 = standard ARAP; larger = stiffer). Only for
         ``energy="rring"``. A rigidity preset ("distort", "normal", "rigid") stands for its
         r (:data:`arapkit.methods.planar.PRESETS`).
-    weights : {"cotan", "cotan-clamped", "cotan-clamped-each", "uniform"}
-        Edge weights (see :mod:`arapkit.mesh.weights`).
+    weights : str or (m,) array, optional
+        Edge weights. On a mesh ``"cotan"``, ``"cotan-clamped"`` (the default),
+        ``"cotan-clamped-each"`` or ``"uniform"`` (:mod:`arapkit.mesh.weights`); on a point
+        cloud ``"gaussian"`` (the default), ``"uniform"`` or ``"laplacian"``
+        (:mod:`arapkit.mesh.cloud_weights`); or one positive weight per edge. None: the
+        shape's default (a :class:`arapkit.Graph`'s own weights where it has them).
     energy : {"rring", "spokes-and-rims", "sr-arap", "smooth-arap", "embedded"}
         The method (see ``docs/methods.md``): r-ring ARAP (Chen et al. 2017),
         spokes-and-rims ARAP (Chao et al. 2010), smooth-rotation ARAP (Levi & Gotsman
@@ -217,12 +227,14 @@ class Deformer:
     True
     """
 
-    def __new__(cls, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
-                volumetric: bool = False, density: float | None = None,
+    def __new__(cls, mesh: Mesh | PointCloud, handles, rings=1, weights: str | None = None,
+                *, volumetric: bool = False, density: float | None = None,
                 multires: bool | None = None, proxy_vertices: int | None = None,
                 levels=None, **options):
-        shape = PlanarInput.of(mesh)
+        shape = PlanarInput.of_shape(mesh)  # a mesh, or a point cloud (solved in 3D)
         mesh = shape.mesh
+        check_domain(mesh, options.get("energy", "rring"), volumetric=volumetric,
+                     init=options.get("init", "identity"))
         if not volumetric:
             if density is not None:
                 raise InputError("density is an option of volumetric=True")
@@ -258,10 +270,10 @@ class Deformer:
 
     def __init__(
         self,
-        mesh: Mesh,
+        mesh: Mesh | PointCloud,
         handles,
         rings=1,
-        weights: str = DEFAULT_WEIGHTS,
+        weights: str | None = None,
         *,
         volumetric: bool = False,
         density: float | None = None,
@@ -295,7 +307,7 @@ class Deformer:
             if not info.rigidity_map:
                 raise InputError(f"ring_scale: energy '{energy}' has no rigidity map")
             options["ring_scale"] = self.ring_scale
-        shape = self.__dict__.pop("_checked_shape", None) or PlanarInput.of(mesh)
+        shape = self.__dict__.pop("_checked_shape", None) or PlanarInput.of_shape(mesh)
         mesh = shape.mesh
         self.mesh = mesh
         #: the shape as given (2D or 3D) and the dimension it is solved in
@@ -303,7 +315,8 @@ class Deformer:
         self.dim = solve_dim(shape, dim, info.planar, energy)
         self._plane = PlanarSolver(shape, flips, self.device)
         self.energy = energy
-        self.weights_kind = weights
+        # None: the shape's domain's own (cotan-clamped on a mesh, gaussian on a cloud)
+        self.weights_kind = domain_of(mesh).default_weights if weights is None else weights
         self.tol = tolerance(tol)
         self.max_iter = iteration_cap(max_iter)
         if init not in INITS:
@@ -335,6 +348,8 @@ class Deformer:
         self.problem = ARAPProblem.from_mesh(
             mesh, handles, energy, weights, rings=rings, free_components=free_components,
             reorder=reorder, dim=self.dim, **options)
+        if self.problem.weights_kind is not None:
+            self.weights_kind = self.problem.weights_kind
         self._rings = self.problem.energy.rings[self.problem.iperm]
         if sr_roi is not None:
             _check_outside_roi_is_held(mesh, sr_roi, handles)
@@ -572,6 +587,7 @@ class Deformer:
             raise InputError(f"unknown init '{mode}' (use {' or '.join(INITS)})")
         if mode == "identity":
             return None
+        check_domain(self.mesh, init=mode)
         # embedded deformation has no problem: its constrained vertices are the handles
         p = self.problem
         if self._laplacian_editor is None:

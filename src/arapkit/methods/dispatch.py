@@ -20,14 +20,15 @@ from __future__ import annotations
 
 from typing import Any
 
+from ..arap.domains import domain_of
 from ..arap.energies import energy_info
 from ..arap.energies.smooth_arap import DEFAULT_LAMBDA, check_smooth_lambda
 from ..arap.energies.sr_arap import DEFAULT_ALPHA, check_alpha
-from ..errors import InputError
+from ..errors import Advice, InputError
 from ..mesh.model import Mesh
 from .registry import INTERFACES, MethodInfo, MethodOption, method, method_names, methods, register
 
-__all__ = ["INITS", "MULTIRES_AUTO_VERTICES", "check_method", "coarse_to_fine",
+__all__ = ["INITS", "MULTIRES_AUTO_VERTICES", "check_domain", "check_method", "coarse_to_fine",
            "refuse_acceleration", "register_variant", "variant"]
 
 INITS = ("identity", "laplacian")
@@ -45,7 +46,8 @@ def _local_global_method(name: str, label: str, **kw: Any) -> MethodInfo:
     en = energy_info(name)
     # every energy of the loop is a neighbourhood energy, which the planar backend runs
     facts = {"descent": en.descent, "rigidity_map": en.rigidity_map,
-             "accelerate": en.descent, "multires": en.descent, "planar": True}
+             "accelerate": en.descent, "multires": en.descent, "planar": True,
+             "needs_faces": en.faces_needed({})}
     return MethodInfo(name, label, local_global=True, **(facts | kw))
 
 
@@ -94,6 +96,37 @@ def check_method(energy: str, sr_alpha=None, nodes=None, sr_roi=None,
                for name, opt in info.options.items()}
     # an option without a default is left out unless given
     return {key: value for key, value in options.items() if value is not None}
+
+
+def check_domain(shape, energy: str = "rring", *, volumetric: bool = False,
+                 init="identity") -> None:
+    """Refuse, in one line, what ``shape``'s domain cannot do: a method defined on
+    triangles (the registry's ``needs_faces``), a volume or a Laplacian start on a point
+    cloud.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from arapkit.mesh.cloud import PointCloud
+    >>> check_domain(PointCloud(np.eye(3), name="c.ply"), "sr-arap")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: c.ply: energy='sr-arap' needs a triangle mesh and c.ply is ...
+    """
+    dom = domain_of(shape)
+    if dom.has_faces:
+        return
+    name = shape.name
+    what = f" and {name} is a {dom.label}"
+    if energy in method_names("library") and not method(energy).applies_to(False):
+        fits = [m.name for m in methods("library") if m.applies_to(False)]
+        raise InputError(Advice("{energy} needs a triangle mesh", energy=energy).after(
+            f"{name}: ").before(f"{what} (methods for point clouds: {', '.join(fits)})"))
+    if volumetric:
+        raise InputError(f"{name}: volumetric ARAP fills a closed triangle surface{what}")
+    if isinstance(init, str) and init == "laplacian":
+        raise InputError(Advice("{init} (Laplacian editing) needs a triangle mesh",
+                                init="laplacian").after(f"{name}: ").before(what))
 
 
 def refuse_acceleration(info: MethodInfo, remedy: str = "") -> None:

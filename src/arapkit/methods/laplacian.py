@@ -25,8 +25,9 @@ __all__ = ["LaplacianEditor", "laplacian_edit", "differential_operator"]
 
 # one linear solve, no iterations: the library offers it as its own class (LaplacianEditor,
 # not through Deformer), the editor as a solver-panel method
+# its operator reads Voronoi areas and cotangents of triangles
 register(MethodInfo("laplacian", "Laplacian editing", local_global=False, descent=True,
-                    interfaces=frozenset({"editor"}),
+                    interfaces=frozenset({"editor"}), needs_faces=True,
                     why_not={"torch": "it is not a local/global energy"}))
 
 

@@ -81,6 +81,9 @@ class MethodInfo:
     multires : bool
         Can be solved coarse to fine on a decimated proxy (``multires=True``,
         :mod:`arapkit.methods.multires`): a local/global descent method.
+    needs_faces : bool
+        Defined on triangles: refused on a point cloud or graph (a shape whose domain,
+        :func:`arapkit.arap.domains.domain_of`, has no faces), in every door.
     planar : bool
         Runs in the plane on a planar shape (2 x 2 rotations, no folded triangles:
         :mod:`arapkit.methods.planar`); a method without it solves planar shapes in 3D.
@@ -109,12 +112,23 @@ class MethodInfo:
     accelerate: bool = False
     volumetric: bool = False
     multires: bool = False
+    needs_faces: bool = False
     planar: bool = False
     groups: bool = False
     handle_tol: float = 0.0
     options: dict[str, MethodOption] = field(default_factory=dict, hash=False)
     interfaces: frozenset[str] = field(default_factory=lambda: frozenset(INTERFACES))
     why_not: dict[str, str] = field(default_factory=dict, hash=False, compare=False)
+
+    def applies_to(self, has_faces: bool) -> bool:
+        """Whether the method runs on a shape with (or without) triangles.
+
+        Examples
+        --------
+        >>> method("spokes-and-rims").applies_to(False), method("rring").applies_to(False)
+        (False, True)
+        """
+        return has_faces or not self.needs_faces
 
     @property
     def exact_handles(self) -> bool:

@@ -1,4 +1,5 @@
-"""The renderer under arapkit's figures: flat-shaded meshes on a Matplotlib axes, no pyplot.
+"""The renderer under arapkit's figures: flat-shaded meshes and point clouds (splats) on a
+Matplotlib axes, no pyplot.
 
 Meshes are drawn as flat-shaded 2-D polygons in an orthographic view, sorted back to
 front (painter's algorithm), which is much faster than ``mplot3d`` and looks the same for
@@ -47,6 +48,7 @@ __all__ = [
     "FIXED_COLOR",
     "MOVED_COLOR",
     "REST_COLOR",
+    "cluster_points",
     "cluster_simplify",
     "colorbar",
     "colormap",
@@ -54,6 +56,7 @@ __all__ = [
     "mark",
     "new_figure",
     "render_mesh",
+    "render_points",
     "rings_colormap",
     "value_norm",
     "view_basis",
@@ -211,7 +214,7 @@ def cluster_simplify(
 def render_mesh(
     ax: Axes,
     vertices: np.ndarray,
-    faces: np.ndarray,
+    faces: np.ndarray | None,
     values: np.ndarray | None = None,
     *,
     basis: np.ndarray | None = None,
@@ -226,7 +229,8 @@ def render_mesh(
     Parameters
     ----------
     ax : matplotlib Axes (2-D)
-    vertices : (n, 3), faces : (m, 3)
+    vertices : (n, 3), faces : (m, 3) or None
+        None: a point cloud, drawn by :func:`render_points` (``max_faces`` points at most).
     values : (n,) float, optional
         Per-vertex scalar; each face takes the mean of its corners.
     basis : (3, 3), optional
@@ -254,6 +258,9 @@ def render_mesh(
     >>> render_mesh(ax, V, F, np.array([0.0, 1, 2])).vmax > 0
     True
     """
+    if faces is None:  # a point cloud: points drawn as splats
+        return render_points(ax, vertices, values, basis=basis, cmap=cmap, norm=norm,
+                             max_points=max_faces, color=color, reduce=reduce)
     V, F, vals = cluster_simplify(vertices, faces, max_faces, values, reduce)
     B = view_frame(V)[0] if basis is None else np.asarray(basis)
     P = V @ B.T  # screen x, screen y, depth (towards viewer)
@@ -277,6 +284,89 @@ def render_mesh(
     )
     ax.add_collection(coll)
     frame(ax, P[:, :2])
+    return norm
+
+
+def cluster_points(points: np.ndarray, max_points: int, values: np.ndarray | None = None,
+                   reduce: str = "mean") -> tuple[np.ndarray, np.ndarray | None]:
+    """At most ``max_points`` points for display: the centroids of the occupied cells of a
+    regular grid (refined as :func:`cluster_simplify`'s), each with the mean (or, with
+    ``reduce="max"``, the largest) of its points' values.
+
+    Examples
+    --------
+    >>> P = np.random.default_rng(0).random((5000, 3))
+    >>> Q, v = cluster_points(P, 500, np.arange(5000.0), "max")
+    >>> len(Q) <= 500 and float(v.max()) == 4999.0
+    True
+    """
+    P = np.asarray(points, dtype=np.float64)
+    if len(P) <= max_points:
+        return P, None if values is None else np.asarray(values, np.float64)
+    lo, span = P.min(0), np.maximum(np.ptp(P, 0), 1e-300)
+    g = max(int(max_points ** (1 / 2)), 2)
+    while True:
+        cell = np.minimum((((P - lo) / span) * g).astype(np.int64), g - 1)
+        key = (cell[:, 0] * g + cell[:, 1]) * g + cell[:, 2]
+        uniq, label = np.unique(key, return_inverse=True)
+        if len(uniq) <= max_points or g <= 2:
+            break
+        g = max(int(g * np.sqrt(max_points / len(uniq)) * 0.95), 2)
+    label = label.ravel()
+    count = np.bincount(label, minlength=len(uniq)).astype(np.float64)
+    Q = np.stack([np.bincount(label, P[:, k], len(uniq)) for k in range(3)], 1) / count[:, None]
+    if values is None:
+        return Q, None
+    v = np.asarray(values, np.float64)
+    if reduce == "max":
+        out = np.full(len(uniq), -np.inf)
+        np.maximum.at(out, label, v)
+        return Q, out
+    return Q, np.bincount(label, v, len(uniq)) / count
+
+
+def render_points(
+    ax: Axes,
+    points: np.ndarray,
+    values: np.ndarray | None = None,
+    *,
+    basis: np.ndarray | None = None,
+    cmap: str | Colormap = ENERGY_CMAP,
+    norm: Normalize | None = None,
+    max_points: int = DEFAULT_MAX_FACES,
+    color: Sequence[float] | None = None,
+    reduce: str = "mean",
+) -> Normalize | None:
+    """Draw a point cloud into ``ax`` as round splats, back to front, optionally coloured by
+    per-point ``values`` (as :func:`render_mesh`); nearer points are drawn lighter.
+
+    Clouds of more than ``max_points`` points are drawn as their grid clusters
+    (:func:`cluster_points`); the splat size follows the points' count.
+
+    Examples
+    --------
+    >>> ax = new_figure().subplots()
+    >>> render_points(ax, np.random.default_rng(0).random((100, 3)), np.arange(100.0)).vmax > 0
+    True
+    """
+    Q, vals = cluster_points(points, max_points, values, reduce)
+    B = view_frame(Q)[0] if basis is None else np.asarray(basis)
+    S = Q @ B.T  # screen x, screen y, depth (towards viewer)
+    depth = S[:, 2]
+    span = float(np.ptp(depth)) if len(depth) > 1 else 0.0
+    # depth cue: the far side darker, as the mesh's shading would show it
+    shade = 0.55 + 0.45 * ((depth - depth.min()) / span if span > 0 else np.ones(len(S)))
+    if vals is not None:
+        if norm is None:
+            norm = value_norm([vals])
+        rgb = colormap(cmap)(norm(vals))[:, :3]
+    else:
+        rgb = np.tile(np.asarray(color if color is not None else REST_COLOR), (len(S), 1))
+    rgb = np.clip(rgb * shade[:, None], 0.0, 1.0)
+    order = np.argsort(depth, kind="stable")  # back to front
+    size = float(np.clip(6e4 / max(len(S), 1), 0.3, 30.0))
+    ax.scatter(S[order, 0], S[order, 1], s=size, c=rgb[order], marker="o", linewidths=0)
+    frame(ax, S[:, :2])
     return norm
 
 

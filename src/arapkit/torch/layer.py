@@ -19,7 +19,6 @@ from ..arap.backends.torch_backend import (
 from ..arap.problem import ARAPProblem
 from ..errors import InputError
 from ..mesh.model import bounding_box_diagonal
-from ..mesh.weights import DEFAULT_WEIGHTS
 from ..validate import iteration_cap, tolerance
 
 __all__ = ["ARAPLayer"]
@@ -190,13 +189,15 @@ class ARAPLayer(_torch.nn.Module):
 
     Parameters
     ----------
-    mesh : arapkit.Mesh
+    mesh : arapkit.Mesh, or a point cloud (arapkit.PointCloud, Graph, an (n, 3) array)
+        The shape; a point cloud is solved on its neighbourhood graph (``docs/clouds.md``).
     handles : (h,) int
         Handle vertices; ``targets[..., i, :]`` is where ``handles[i]`` goes.
     rings : int or (n,) int
         r per vertex (rigidity), held fixed.
-    weights : str
-        Edge weighting (default :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`).
+    weights : str, optional
+        Edge weighting (default: the shape's own, :data:`arapkit.mesh.weights.DEFAULT_WEIGHTS`
+        on a mesh, ``gaussian`` on a point cloud).
     energy : {"rring", "spokes-and-rims", "smooth-arap"}
         The local/global energy (SR-ARAP's rotation coupling has no fixed point of one
         step alone and is not offered here). Smooth ARAP runs at its default lambda.
@@ -244,7 +245,7 @@ class ARAPLayer(_torch.nn.Module):
     True
     """
 
-    def __init__(self, mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS,
+    def __init__(self, mesh, handles, rings=1, weights: str | None = None,
                  energy: str = "rring", tol: float = 1e-3, max_iter: int = 1000,
                  dtype=_torch.float32, device="cpu", *, xtol: float | None = None,
                  adjoint_tol: float | None = None, adjoint_max_iter: int = 1000,
@@ -253,10 +254,12 @@ class ARAPLayer(_torch.nn.Module):
         check_dtype(dtype)
         _check_layer_energy(energy)
         from ..mesh.planar import PlanarInput
+        from ..methods.dispatch import check_domain
         from ..methods.planar import solve_dim
         from ..methods.registry import method
 
-        shape = PlanarInput.of(mesh)
+        shape = PlanarInput.of_shape(mesh)  # a point cloud too, on its graph
+        check_domain(shape.mesh, energy)  # a method on triangles refuses a cloud
         #: solved in the plane (turns about z only); ``given_dim``: the caller's columns
         self.planar = solve_dim(shape, dim, method(energy).planar, energy) == 2
         self.given_dim = shape.given_dim

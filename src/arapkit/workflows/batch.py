@@ -135,11 +135,14 @@ def _deform_command(job: dict, output: str) -> list[str]:
         cmd += ["--rings-file", job["rings_file"]]
     else:
         cmd += ["--rings", str(job["rings"])]
-    cmd += ["--weights", job["weights"], "--energy", job["energy"], "--tol", repr(job["tol"]),
+    if job["weights"] is not None:  # None: the shape's default, as deform's
+        cmd += ["--weights", job["weights"]]
+    cmd += ["--energy", job["energy"], "--tol", repr(job["tol"]),
             "--max-iter", str(job["max_iter"]), "--init", job["init"]]
     # the method's own options and welding, as given (deform fills in the same defaults)
     for key, flag in (("sr_alpha", "--sr-alpha"), ("nodes", "--nodes"),
-                      ("smooth_lambda", "--smooth-lambda"), ("weld", "--weld")):
+                      ("smooth_lambda", "--smooth-lambda"), ("weld", "--weld"),
+                      ("neighbours", "--neighbours"), ("radius", "--radius")):
         if job[key] is not None:
             cmd.append(f"{flag}={job[key]}")
     if job["accelerate"] is not None:  # None: the method's choice, as deform's default

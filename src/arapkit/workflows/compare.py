@@ -20,10 +20,10 @@ from typing import Any
 
 import numpy as np
 
+from ..mesh.cloud import PointCloud
 from ..mesh.model import Mesh
 from ..mesh.orientation import view_frame
 from ..mesh.quality import folded_edge_fraction, volume_change
-from ..mesh.weights import DEFAULT_WEIGHTS
 from ..plots.colors import ENERGY_CMAP
 
 __all__ = ["MethodRun", "comparison_figure", "comparison_rows", "format_rows",
@@ -55,11 +55,13 @@ class MethodRun:
 
 
 def method_list(rings: int = 3, rings_map: np.ndarray | None = None,
-                volumetric: bool = False) -> list[tuple[str, dict[str, Any]]]:
+                volumetric: bool = False,
+                has_faces: bool = True) -> list[tuple[str, dict[str, Any]]]:
     """The methods of a comparison as (label, Deformer keyword arguments).
 
     ``volumetric`` adds volumetric ARAP (the course report's inner edges) at r = 1, and
-    with the rigidity map when one is given.
+    with the rigidity map when one is given. ``has_faces=False`` (a point cloud) leaves
+    out the methods defined on triangles (the registry's ``needs_faces``).
 
     Examples
     --------
@@ -67,14 +69,16 @@ def method_list(rings: int = 3, rings_map: np.ndarray | None = None,
     ['ARAP', 'SR-ARAP', 'Smooth ARAP', 'embedded', 'r-ring r=4']
     >>> [label for label, _ in method_list(4, volumetric=True)][-1]
     'volumetric ARAP'
+    >>> [label for label, _ in method_list(4, has_faces=False)]
+    ['ARAP', 'embedded', 'r-ring r=4']
     """
     from ..methods.registry import methods as registered
 
-    # every method registered for compare, at r = 1 where it has a rigidity map
+    # every method registered for compare that applies, at r = 1 where it has a rigidity map
     methods: list[tuple[str, dict[str, Any]]] = [
         (LABELS.get(m.name, m.name),
          {"energy": m.name, **({"rings": 1} if m.rigidity_map else {})})
-        for m in registered("compare")
+        for m in registered("compare") if m.applies_to(has_faces)
     ]
     if rings != 1:
         methods.append((f"r-ring r={rings}", {"energy": RINGS_METHOD, "rings": rings}))
@@ -90,8 +94,8 @@ def method_list(rings: int = 3, rings_map: np.ndarray | None = None,
     return methods
 
 
-def run_comparison(mesh: Mesh, handles, targets, *, rings: int = 3,
-                   rings_map: np.ndarray | None = None, weights: str = DEFAULT_WEIGHTS,
+def run_comparison(mesh: Mesh | PointCloud, handles, targets, *, rings: int = 3,
+                   rings_map: np.ndarray | None = None, weights: str | None = None,
                    tol: float = 1e-3, max_iter: int = 1000, sr_alpha: float | None = None,
                    nodes: int | None = None, volumetric: bool = False,
                    progress=None) -> list[MethodRun]:
@@ -109,12 +113,14 @@ def run_comparison(mesh: Mesh, handles, targets, *, rings: int = 3,
     >>> [r.label for r in runs], all(r.folded == 0 for r in runs)
     (['ARAP', 'SR-ARAP', 'Smooth ARAP', 'embedded', 'r-ring r=2'], True)
     """
-    from ..methods.deformer import Deformer
+    from ..methods.deformer import Deformer, check_domain
     from ..methods.registry import method
 
     targets = np.asarray(targets, dtype=np.float64)
     runs = []
-    for label, kw in method_list(rings, rings_map, volumetric):
+    if volumetric:
+        check_domain(mesh, volumetric=True)
+    for label, kw in method_list(rings, rings_map, volumetric, mesh.faces is not None):
         kw = dict(kw)
         info = method(kw["energy"])
         given = {"sr_alpha": sr_alpha, "nodes": nodes}
@@ -132,8 +138,11 @@ def run_comparison(mesh: Mesh, handles, targets, *, rings: int = 3,
         run = MethodRun(label, kw["energy"],
                         {k: v for k, v in kw.items() if k not in ("energy", "tol", "volumetric")},
                         res, seconds, notes=list(d.notes))
-        run.folded = folded_edge_fraction(mesh, res.vertices)
-        run.volume_change = volume_change(mesh, res.vertices)
+        if mesh.faces is not None:  # folds and volume are a surface's
+            run.folded = folded_edge_fraction(mesh, res.vertices)
+            run.volume_change = volume_change(mesh, res.vertices)
+        else:
+            run.folded = float("nan")
         run.handle_error = float(np.linalg.norm(res.vertices[d.handles] - targets,
                                                 axis=1).max())
         runs.append(run)
@@ -183,7 +192,8 @@ def format_rows(rows: list[dict[str, Any]]) -> str:
             "volume %", "handle err"]
     cells = [[r["method"], str(r["iterations"]), "yes" if r["converged"] else "no",
               f"{r['time_s']:.2f}", f"{r['own_energy']:.4g}",
-              f"{100 * r['folded_edge_fraction']:.3f}",
+              "n/a" if np.isnan(r["folded_edge_fraction"])
+              else f"{100 * r['folded_edge_fraction']:.3f}",
               "n/a" if np.isnan(r["volume_change"]) else f"{100 * r['volume_change']:.2f}",
               f"{r['max_handle_error']:.2g}"] for r in rows]
     widths = [max(len(h), *(len(c[i]) for c in cells)) if cells else len(h)
@@ -231,14 +241,26 @@ def comparison_figure(mesh: Mesh, runs: list[MethodRun], handles, targets=None,
     hnorm = BoundaryNorm([-0.5, 0.5, 1.5, 2.5], 3)
     plots.render_mesh(axes[0], V, F, labels, basis=basis, cmap=hcmap, norm=hnorm, reduce="max")
     axes[0].set_title("rest shape and handles", fontsize=9)
-    e, a0 = dihedral_angles(mesh, V)
-    dnorm = Normalize(0.0, 60.0)
+    surface = F is not None
+    if surface:
+        e, a0 = dihedral_angles(mesh, V)
+        dnorm = Normalize(0.0, 60.0)
+        what = "dihedral-angle change (degrees, clipped at 60)"
+    else:  # a point cloud: how much its graph's edges stretched or shrank
+        E = mesh.edges
+        l0 = np.linalg.norm(V[E[:, 0]] - V[E[:, 1]], axis=1)
+        dnorm = Normalize(0.0, 20.0)
+        what = "edge-length change at each point (%, clipped at 20)"
     for ax, run in zip(axes[1:], runs):
         P = run.result.vertices
-        _, a1 = dihedral_angles(mesh, P)
-        change = np.degrees(np.abs(np.angle(np.exp(1j * (a1 - a0)))))
         per_vertex = np.zeros(len(V))
-        E = mesh.edges[e]
+        if surface:
+            _, a1 = dihedral_angles(mesh, P)
+            change = np.degrees(np.abs(np.angle(np.exp(1j * (a1 - a0)))))
+            E = mesh.edges[e]
+        else:
+            l1 = np.linalg.norm(P[E[:, 0]] - P[E[:, 1]], axis=1)
+            change = 100 * np.abs(l1 / np.where(l0 > 0, l0, 1.0) - 1.0) * (l0 > 0)
         np.maximum.at(per_vertex, E[:, 0], change)
         np.maximum.at(per_vertex, E[:, 1], change)
         plots.render_mesh(ax, P, F, per_vertex, basis=basis, cmap=ENERGY_CMAP, norm=dnorm)
@@ -246,16 +268,16 @@ def comparison_figure(mesh: Mesh, runs: list[MethodRun], handles, targets=None,
         plots.mark(ax, P[h[fixed]], basis, plots.FIXED_COLOR, "fixed")
         plots.mark(ax, P[h[~fixed]], basis, plots.MOVED_COLOR, "moved")
         vol = "" if np.isnan(run.volume_change) else f", vol {100 * run.volume_change:+.1f}%"
+        fold = "" if np.isnan(run.folded) else f"folded {100 * run.folded:.2f}%"
         ax.set_title(f"{run.label}: {run.result.iterations} it., {run.seconds:.2f} s\n"
-                     f"folded {100 * run.folded:.2f}%{vol}", fontsize=8)
+                     f"{fold}{vol}", fontsize=8)
     # one camera: the same view basis and the same frame in every panel
     xy = np.concatenate(shapes) @ basis[:2].T
     for ax in axes[:n]:
         plots.frame(ax, xy)
     for ax in axes[n:]:
         ax.set_axis_off()
-    plots.colorbar(fig, list(axes[1:n]), dnorm, ENERGY_CMAP,
-                    "dihedral-angle change (degrees, clipped at 60)")
+    plots.colorbar(fig, list(axes[1:n]), dnorm, ENERGY_CMAP, what)
     if title:
         fig.suptitle(title, fontsize=10)
     return fig

@@ -5,9 +5,10 @@ input is one :class:`~arapkit.errors.InputError` line naming its file, before an
 :func:`run_fit` fits, and :func:`save_fit` / :func:`fit_report` write the fitted template
 (with the template file's own vertex order, faces and attributes) and the JSON report.
 
-The target is a mesh file (any format :func:`arapkit.load_mesh` reads), or a point cloud:
-``.npy``, ``.xyz`` / ``.txt`` / ``.pts`` or a PLY without faces
-(:func:`arapkit.io.points.load_points`).
+The target is a mesh file (any format :func:`arapkit.load_mesh` reads), or a point cloud
+(any file :func:`arapkit.load_points` reads: ``.npy``, ``.xyz`` / ``.txt`` / ``.pts``,
+``.xyzn``, ``.xyzrgb``, a PLY, OBJ or OFF without faces), read by
+:func:`arapkit.io.load_shape` as every door reads a shape.
 
 Examples
 --------
@@ -37,9 +38,8 @@ import numpy as np
 
 from .. import __version__
 from ..errors import InputError
-from ..io import load_mesh, load_rings, save_mesh
+from ..io import load_mesh, load_rings, load_shape, save_mesh
 from ..io.landmarks import load_landmarks
-from ..io.points import is_point_file, load_points, ply_points
 from ..mesh.model import Mesh
 from ..mesh.weights import DEFAULT_WEIGHTS
 from ..methods.fit import DEFAULT_SCHEDULE, FitResult, FitTarget, Fitter
@@ -94,18 +94,13 @@ class FitInputs:
 
 
 def load_target(path: str | os.PathLike) -> FitTarget:
-    """A target file as a :class:`~arapkit.methods.fit.FitTarget`: a point cloud
-    (``.npy``, ``.xyz``, ``.txt``, ``.pts``, a PLY without faces) or a mesh."""
-    p = os.fspath(path)
-    name = os.path.basename(p)
-    if is_point_file(p):
-        points, normals = load_points(p)
-        return FitTarget.from_points(points, normals, name)
-    if p.lower().endswith(".ply") and os.path.isfile(p):
-        cloud = ply_points(p)
-        if cloud is not None:
-            return FitTarget.from_points(cloud[0], cloud[1], name)
-    return FitTarget.from_mesh(load_mesh(p))
+    """A target file as a :class:`~arapkit.methods.fit.FitTarget`: a mesh where the file
+    has faces, else a point cloud with its normals where it has them
+    (:func:`arapkit.io.load_shape`)."""
+    shape = load_shape(path)
+    if isinstance(shape, Mesh):
+        return FitTarget.from_mesh(shape)
+    return FitTarget.from_points(shape.points, shape.normals, shape.name)
 
 
 def load_fit_inputs(job: FitJob) -> FitInputs:

@@ -23,8 +23,9 @@ from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from .. import validate
+from ..arap.domains import all_weight_kinds
 from ..errors import InputError
-from ..mesh.weights import WEIGHT_KINDS
 from ..methods.deformer import INITS, check_method
 from ..methods.registry import method, methods
 from ..validate import iteration_cap, read_input, ring_size, tolerance
@@ -43,7 +44,7 @@ __all__ = ["JOB_KEYS", "dry_run", "job_hash", "job_spec", "load_jobs", "normalis
 #: Keys a job object may have (``mesh``, ``handles`` and ``output`` are required).
 JOB_KEYS = ("mesh", "handles", "transform", "rings", "rings_file", "weights", "energy",
             "sr_alpha", "nodes", "smooth_lambda", "weld", "tol", "max_iter", "init",
-            "accelerate", "output", "groups")
+            "accelerate", "output", "neighbours", "radius", "groups")
 #: every optional key of :data:`JOB_KEYS` and its default
 _DEFAULTS = {k: JOB_DEFAULTS[k] for k in JOB_KEYS if k in JOB_DEFAULTS}
 
@@ -91,9 +92,24 @@ def _check_weld(value: Any, where: str) -> float | None:
     return float(value)
 
 
-def _check_output(out: Any, where: str) -> None:
-    """``output``: a mesh file name inside the output folder."""
-    from ..io import mesh_format
+def _check_graph(job: dict, where: str) -> None:
+    """``neighbours`` / ``radius``: a point cloud's graph (not both)."""
+    from ..mesh.neighbours import MAX_NEIGHBOURS
+
+    if job["neighbours"] is not None and job["radius"] is not None:
+        raise InputError(f"{where}: give 'neighbours' or 'radius', not both")
+    if job["neighbours"] is not None:
+        job["neighbours"] = validate.integer(job["neighbours"], f"{where}: 'neighbours'",
+                                             lo=1, hi=MAX_NEIGHBOURS)
+    if job["radius"] is not None:
+        job["radius"] = validate.number(job["radius"], f"{where}: 'radius'", lo=0.0,
+                                        lo_open=True)
+
+
+def _check_output(out: Any, where: str, job_mesh: str) -> None:
+    """``output``: a mesh (or, for a point cloud, a cloud) file name inside the output
+    folder."""
+    from ..io.clouds import check_shape_output
 
     if not isinstance(out, str) or not out:
         raise InputError(f"{where}: 'output' must be a file name inside the output folder")
@@ -102,7 +118,7 @@ def _check_output(out: Any, where: str) -> None:
         raise InputError(f"{where}: 'output' {out!r} must be a file name inside the output "
                          "folder (no absolute path, no '..')")
     try:
-        mesh_format(out)
+        check_shape_output(out, job_mesh)
     except InputError as e:
         raise InputError(f"{where}: {e}") from None
 
@@ -165,8 +181,9 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
         raise InputError(f"{where}: give 'rings' or 'rings_file', not both")
     # the rules of the library's own parameters (arapkit.validate), with the job's location
     job["rings"] = ring_size(job["rings"], f"{where}: 'rings'")
-    if job["weights"] not in WEIGHT_KINDS:
-        raise InputError(f"{where}: 'weights' must be one of {', '.join(WEIGHT_KINDS)}, "
+    # null: the shape's own default (cotan-clamped on a mesh, gaussian on a point cloud)
+    if job["weights"] is not None and job["weights"] not in all_weight_kinds():
+        raise InputError(f"{where}: 'weights' must be one of {', '.join(all_weight_kinds())}, "
                          f"got {json.dumps(job['weights'])}")
     _check_method(job, where)
     job["weld"] = _check_weld(job["weld"], where)
@@ -177,7 +194,8 @@ def normalise_job(obj: Any, base: str | os.PathLike = ".", where: str = "job") -
                          f"got {json.dumps(job['init'])}")
     if job["accelerate"] is not None and not isinstance(job["accelerate"], bool):
         raise InputError(f"{where}: 'accelerate' must be true or false")
-    _check_output(job["output"], where)
+    _check_graph(job, where)
+    _check_output(job["output"], where, job["mesh"])
     # a job without groups has no "groups" key: its hash (and a resumed run) stays as it was
     return {k: job[k] for k in JOB_KEYS if k != "groups" or job[k] is not None}
 

@@ -36,13 +36,14 @@ from typing import Any
 import numpy as np
 
 from .. import __version__
+from ..arap.domains import domain_of
 from ..errors import Advice, InputError, worded_for
 from ..methods.deformer import Deformer
 from ..methods.registry import method_names
 
 __all__ = ["DEFAULT_ENERGY", "ENERGIES", "JOB_DEFAULTS", "DeformJob", "JobInputs", "PreparedJob",
            "describe_groups", "describe_rings", "error_message", "job_report", "load_job_inputs",
-           "method_description", "prepare_job", "save_result"]
+           "method_description", "prepare_job", "save_result", "weights_used"]
 
 
 def _solver_defaults() -> dict[str, Any]:
@@ -69,7 +70,7 @@ class DeformJob:
     Attributes
     ----------
     mesh : str
-        Input mesh file.
+        Input mesh file, or a point cloud file (:func:`arapkit.io.clouds.load_shape`).
     handles : str, list or dict
         Handle file (``.json`` groups or ``.sel``), or the handle groups themselves (the
         JSON schema of ``docs/handles.md``, already parsed).
@@ -80,7 +81,8 @@ class DeformJob:
     rings_file : str or None
         Per-vertex ring sizes (see :func:`arapkit.io.rigidity.load_rings`).
     weights, tol, max_iter, init, accelerate
-        As for :class:`arapkit.Deformer`.
+        As for :class:`arapkit.Deformer` (``weights`` None: the shape's default,
+        ``cotan-clamped`` on a mesh and ``gaussian`` on a point cloud).
     energy : str
         One of :data:`ENERGIES`.
     sr_alpha, nodes, smooth_lambda : optional
@@ -92,6 +94,9 @@ class DeformJob:
     volumetric, interior_density
         Volumetric ARAP (:class:`arapkit.methods.volumetric.VolumetricDeformer`) and its interior
         density.
+    neighbours, radius : optional
+        A point cloud's graph (:class:`arapkit.PointCloud`): k nearest neighbours (default
+        10) or every pair closer than ``radius``; refused for a mesh file.
     groups : str, list, dict or None
         A groups file (rigid parts and shared-rotation groups, :func:`arapkit.io.load_groups`)
         or its JSON entries already parsed; None for none.
@@ -102,7 +107,7 @@ class DeformJob:
     transform: str | None = None
     rings: int = _SOLVER["rings"]
     rings_file: str | None = None
-    weights: str = _SOLVER["weights"]
+    weights: str | None = _SOLVER["weights"]
     tol: float = _SOLVER["tol"]
     max_iter: int = _SOLVER["max_iter"]
     init: str = _SOLVER["init"]
@@ -114,6 +119,8 @@ class DeformJob:
     weld: float | None = None
     volumetric: bool = False
     interior_density: float | None = None
+    neighbours: int | None = None
+    radius: float | None = None
     groups: str | list | dict | None = None
 
     def input_files(self) -> list[str]:
@@ -198,7 +205,7 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
     InputError
         Any bad input, with a one-line message naming the file.
     """
-    from ..io import load_mesh
+    from ..io import load_shape
 
     if job.energy not in ENERGIES:
         raise InputError(f"energy {job.energy} is not available in this build "
@@ -211,9 +218,12 @@ def load_job_inputs(job: DeformJob, note: Callable[[str], None] | None = None) -
             # Advice keeps its interface wording through the prefix
             note(msg.after(f"{job.mesh}: ") if isinstance(msg, Advice) else f"{job.mesh}: {msg}")
 
-    source = load_mesh(job.mesh)
+    source = load_shape(job.mesh, neighbours=job.neighbours, radius=job.radius)
     if job.weld is None:
         mesh = source
+    elif source.faces is None:
+        raise InputError(f"{job.mesh}: weld merges a mesh's split vertices; a point cloud has "
+                         "none (coincident points stay two points of the graph)")
     else:
         from ..mesh.welding import weld
 
@@ -286,21 +296,37 @@ def prepare_job(job: DeformJob, note: Callable[[str], None] | None = None) -> Pr
 
 
 def save_result(output: str | os.PathLike, prepared: PreparedJob, res) -> list[str]:
-    """Write the deformed mesh (atomically), with per-vertex energy and rings for PLY.
+    """Write the deformed mesh or point cloud (atomically), with per-vertex energy and
+    rings for PLY.
 
     Everything the input file carried (polygons, UVs, normals, materials, colours, PLY
-    properties) comes out again, and a welded solve is written to the input's own
-    vertices. Returns warning lines for what the output format cannot carry.
+    properties; a cloud's normals turned by the solve's rotations) comes out again, and a
+    welded solve is written to the input's own vertices. Returns warning lines for what
+    the output format cannot carry.
     """
     from ..io import save_mesh
 
+    # the result itself: a point cloud's normals turn by its rotations. Energy and rings
+    # go to PLY only, which has room for them: a mesh's other formats drop them silently,
+    # and a cloud's writer would warn about values the caller never asked for
+    name = os.fspath(output).lower()
+    ply = name.removesuffix(".gz").endswith(".ply")
     return save_mesh(
         output,
-        res.vertices,
+        res,
         vertex_properties={"energy": res.vertex_energy,
-                           "rings": prepared.rings.astype(np.int32)},
+                           "rings": prepared.rings.astype(np.int32)} if ply else None,
         like=prepared.mesh,
     )
+
+
+def weights_used(job: DeformJob, prepared: PreparedJob) -> str | None:
+    """The edge weighting the job's solve used: as given, else the shape's default
+    (``cotan-clamped`` on a mesh, ``gaussian`` on a point cloud)."""
+    kind = getattr(prepared.deformer, "weights_kind", None)
+    if kind is None:
+        kind = job.weights if job.weights is not None else domain_of(prepared.mesh).default_weights
+    return kind if isinstance(kind, str) else None
 
 
 def _volume_parameters(job: DeformJob) -> dict[str, Any]:
@@ -350,6 +376,8 @@ def job_report(
             "mesh": job.mesh,
             "n_vertices": mesh.n_vertices,
             "n_faces": mesh.n_faces,
+            **({} if mesh.faces is not None else {"graph": mesh.graph_description,
+                                                  "n_edges": len(mesh.edges)}),
             "n_components": mesh.n_components,
             "n_boundary_loops": len(mesh.boundary_loops),
             "notes": list(mesh.notes),
@@ -365,7 +393,7 @@ def job_report(
         "method": method_description(job),
         "parameters": {
             "rings": int(job.rings) if not job.rings_file else rings_summary(r),
-            "weights": job.weights,
+            "weights": weights_used(job, prepared),
             "tol": job.tol,
             "max_iter": job.max_iter,
             "init": job.init,

@@ -14,7 +14,9 @@ against bending grows as the square of its radius (a rotation fitted over a patc
 ``rho`` leaves a residual of order ``kappa rho^2`` per edge on a surface bent by curvature
 ``kappa``), so the coarse mesh takes ``r_c = max(1, rint(r s))`` rings, and where even one
 of its rings is wider than the fine mesh's r-ring (``r s < 1``) the one-ring term is blended
-with a membrane term that has no bending stiffness at all, a rotation per triangle:
+with a membrane term that has no bending stiffness at all, a rotation per triangle (on a
+point cloud's graph, which has none, a rotation per edge: a spring, which also resists
+stretch and not bending):
 
     E = sum_k a_k E_k(N(k, 1)) + sum_t 2 (1 - a_t) sum_{e in t} w_te |e' - R_t e|^2,
 
@@ -89,14 +91,21 @@ def _face_shares(graph: EdgeGraph, w: np.ndarray) -> np.ndarray:
     return w[FE] * share
 
 
-def _blended(graph: EdgeGraph, w: np.ndarray, nbh: Neighbourhoods, a: np.ndarray,
-             rings: np.ndarray, options: dict) -> NeighbourhoodEnergy:
-    """The vertices' rings weighted by ``a``, and a rotation per triangle for the rest."""
+def _membrane(graph: EdgeGraph, w: np.ndarray, a: np.ndarray):
+    """The membrane's owners: a rotation per triangle, each edge's weight shared by its
+    triangles (``2 (1 - a_t) w_te``); on a graph without triangles (a point cloud's) a
+    rotation per edge (``2 (1 - a_e) w_e``, ``a_e`` its ends' mean), a spring: like a
+    triangle's, it resists stretch and not bending. Returns the owners' rows
+    (:func:`owner_rows`) and each owner's lowest vertex."""
     E = graph.edges
-    sizes = np.diff(nbh.edge_ptr)
-    entry_w = np.repeat(a, sizes) * w[nbh.edge_idx]
-    disk_coef = nbh.disk_coef  # scaled in place: the fresh structure is this energy's own
-    disk_coef *= np.repeat(a, np.diff(nbh.disk_ptr))[:, None]
+    if graph.faces is None:
+        membrane = 1.0 - a[E].mean(axis=1)
+        order = np.argsort(E.min(axis=1), kind="stable")  # by lowest end, as triangles
+        order = order[membrane[order] > 0.0]
+        t = len(order)
+        rows = owner_rows(graph.vertices, E, t, np.arange(t), order,
+                          2.0 * membrane[order] * w[order])
+        return rows, E[order].min(axis=1)
     F, FE = graph.faces, graph.face_edges
     membrane = 1.0 - a[F].mean(axis=1)
     # triangles by their lowest corner: a chunk of them scatters into a narrow window of
@@ -105,8 +114,21 @@ def _blended(graph: EdgeGraph, w: np.ndarray, nbh: Neighbourhoods, a: np.ndarray
     order = order[membrane[order] > 0.0]
     t = len(order)
     coef = (2.0 * membrane[order, None] * _face_shares(graph, w)[order]).ravel()
-    fe_ptr, fe_idx, fe_w, fd_ptr, fd_idx, fd_coef = owner_rows(
-        graph.vertices, E, t, np.repeat(np.arange(t), 3), FE[order].ravel(), coef)
+    rows = owner_rows(graph.vertices, E, t, np.repeat(np.arange(t), 3), FE[order].ravel(),
+                      coef)
+    return rows, F[order].min(axis=1)
+
+
+def _blended(graph: EdgeGraph, w: np.ndarray, nbh: Neighbourhoods, a: np.ndarray,
+             rings: np.ndarray, options: dict) -> NeighbourhoodEnergy:
+    """The vertices' rings weighted by ``a``, and the membrane (:func:`_membrane`) for the
+    rest."""
+    E = graph.edges
+    sizes = np.diff(nbh.edge_ptr)
+    entry_w = np.repeat(a, sizes) * w[nbh.edge_idx]
+    disk_coef = nbh.disk_coef  # scaled in place: the fresh structure is this energy's own
+    disk_coef *= np.repeat(a, np.diff(nbh.disk_ptr))[:, None]
+    (fe_ptr, fe_idx, fe_w, fd_ptr, fd_idx, fd_coef), lowest = _membrane(graph, w, a)
     edge_idx = np.concatenate([nbh.edge_idx, fe_idx])
     entry_w = np.concatenate([entry_w, fe_w])
     system_w = np.bincount(edge_idx, entry_w, len(E))
@@ -120,7 +142,7 @@ def _blended(graph: EdgeGraph, w: np.ndarray, nbh: Neighbourhoods, a: np.ndarray
         disk_coef=np.ascontiguousarray(np.concatenate([disk_coef, fd_coef])),
         edge_count=edge_counts(edge_idx, len(E)),
     )
-    centres = F[order].min(axis=1).astype(np.int32)
+    centres = lowest.astype(np.int32)
     return NeighbourhoodEnergy("rring", both, entry_w, system_w, rest_term(graph, system_w),
                                options=options, centres=centres)
 
@@ -166,4 +188,5 @@ def _faces_for(options: dict) -> bool:
 
 
 register_energy(EnergyInfo("rring", _build, descent=True, rigidity_map=True,
-                           needs_faces=_faces_for, options=("ring_scale",)))
+                           needs_faces=_faces_for, options=("ring_scale",),
+                           without_faces=True))

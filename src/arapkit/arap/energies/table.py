@@ -50,6 +50,10 @@ class EnergyInfo:
         given options (r-ring ARAP reads triangles only with a ring scale below 1).
     options : tuple of str
         The builder's keyword options.
+    without_faces : bool
+        Where ``needs_faces`` holds it reads the triangles when the graph has them, and is
+        built without them otherwise (r-ring ARAP's ring-scale blend takes a rotation per
+        edge on a point cloud's graph): not refused there.
     """
 
     name: str
@@ -58,6 +62,7 @@ class EnergyInfo:
     rigidity_map: bool = False
     needs_faces: bool | Callable[[dict], bool] = False
     options: tuple[str, ...] = ()
+    without_faces: bool = False
 
     def faces_needed(self, options: dict) -> bool:
         """Whether the energy, with these options, reads the triangles."""
@@ -112,6 +117,6 @@ def make_energy(name: str, graph: EdgeGraph, w: np.ndarray, weights_kind: str | 
         r = r if perm is None else r[perm]
     elif not np.all(np.asarray(rings) == 1):
         raise InputError(f"energy '{name}' has no rigidity map (rings must be 1)")
-    if info.faces_needed(options) and graph.faces is None:
+    if info.faces_needed(options) and graph.faces is None and not info.without_faces:
         raise InputError(f"{graph.name}: energy '{name}' needs a triangle mesh")
     return info.build(graph, w, weights_kind, r, perm, **options)

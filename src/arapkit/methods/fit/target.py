@@ -163,8 +163,9 @@ class FitTarget:
     @classmethod
     def from_any(cls, target, normals=None, name: str = "target") -> FitTarget:
         """A mesh (:class:`~arapkit.Mesh`, ``trimesh.Trimesh``, a (vertices, faces) pair), a
-        point cloud (an (n, 3) array, or an object with ``vertices`` and no faces such as
-        ``trimesh.PointCloud``), with optional per-point ``normals`` for a cloud."""
+        point cloud (an (n, 3) array, an :class:`arapkit.PointCloud` with its normals, or
+        an object with ``vertices`` and no faces such as ``trimesh.PointCloud``), with
+        optional per-point ``normals`` for a cloud."""
         if isinstance(target, FitTarget):
             return target
         name = getattr(target, "name", None) or name
@@ -177,14 +178,16 @@ class FitTarget:
         if V is not None and F is not None and np.size(F):
             return cls.from_mesh(Mesh(np.asarray(V), np.asarray(F), name=name))
         if V is not None:
-            if normals is None:
+            if normals is None:  # trimesh's vertex_normals, an arapkit.PointCloud's normals
                 vn = getattr(target, "vertex_normals", None)
+                if vn is None:
+                    vn = getattr(target, "normals", None)
                 normals = vn if vn is not None and np.shape(vn) == np.shape(V) else None
             return cls.from_points(V, normals, name)
         if isinstance(target, (str, bytes)):
             raise InputError(f"{name}: expected a mesh, a point cloud or an (n, 3) array, "
                              "got a str (load a file with arapkit.load_mesh or "
-                             "arapkit.io.points.load_points)")
+                             "arapkit.load_points)")
         return cls.from_points(target, normals, name)
 
     @classmethod

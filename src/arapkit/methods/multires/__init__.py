@@ -33,8 +33,10 @@ measurements behind each choice.
 
 One module per concept:
 
-* :mod:`.decimator` (with :mod:`.decimation_child`): the proxy, made by quadric decimation
-  in a child process, each full vertex's home on it, and a cache by content;
+* :mod:`.coarsening`: which coarse copy each kind of shape gets (a table by domain);
+* :mod:`.decimator` (with :mod:`.decimation_child`): a mesh's proxy, made by quadric
+  decimation in a child process, each full vertex's home on it, and a cache by content;
+* :mod:`.subsampler`: a point cloud's proxy, a voxel-grid subsample of its points;
 * :mod:`.binding`: how the full mesh follows a coarser one at rest, and the skinning kernels;
 * :mod:`.handles`: the full handles on a coarser mesh (regions, fitted rigid motions);
 * :mod:`.proxy`: the proxy's solvers, its solve from rest and the preview's warm start;
@@ -56,13 +58,16 @@ True
 
 from .binding import SKIN_NEIGHBOURS, Binding, full_tree_of, proxy_rings
 from .coarse_to_fine import AUTO_MIN_VERTICES, MultiresDeformer, Preview
+from .coarsening import Coarsening, coarsening_of
 from .decimator import DEFAULT_PROXY_VERTICES, decimate, decimation, specks, start_decimation
 from .handles import FIT_POINTS, coarse_handles
 from .levels import LEVEL_TOL, PROXY_MAX_ITER, Level
 from .proxy import LEAD_MAX, PROXY_TOL, STIFF_TOL
+from .subsampler import subsample  # registers the point clouds' proxy
 
 # the names the single module arapkit.methods.multires had (it was split into this package)
 __all__ = ["AUTO_MIN_VERTICES", "DEFAULT_PROXY_VERTICES", "FIT_POINTS", "LEAD_MAX",
            "LEVEL_TOL", "PROXY_MAX_ITER", "PROXY_TOL", "SKIN_NEIGHBOURS", "STIFF_TOL",
-           "Binding", "Level", "MultiresDeformer", "Preview", "coarse_handles", "decimate",
-           "decimation", "full_tree_of", "proxy_rings", "specks", "start_decimation"]
+           "Binding", "Coarsening", "Level", "MultiresDeformer", "Preview", "coarse_handles",
+           "coarsening_of", "decimate", "decimation", "full_tree_of", "proxy_rings", "specks",
+           "start_decimation", "subsample"]

@@ -148,7 +148,8 @@ class Binding:
     def between(cls, full: np.ndarray, proxy: np.ndarray,
                 full_tree: cKDTree | None = None, left_out: np.ndarray | None = None,
                 home: np.ndarray | None = None,
-                proxy_faces: np.ndarray | None = None) -> Binding:
+                proxy_faces: np.ndarray | None = None,
+                proxy_adjacency=None) -> Binding:
         """Bind ``full`` (n, 3) rest positions to ``proxy`` (m, 3) ones.
 
         ``full_tree``: :func:`full_tree_of` ``full``, when made beforehand; ``left_out``:
@@ -172,7 +173,8 @@ class Binding:
         if home is None:
             ptr, nbr = np.zeros(m + 1, dtype=np.int64), np.zeros(0, dtype=np.int32)
         else:
-            adj = Mesh(proxy, proxy_faces).adjacency
+            adj = (Mesh(proxy, proxy_faces).adjacency if proxy_adjacency is None
+                   else proxy_adjacency.tocsr())
             ptr, nbr = adj.indptr.astype(np.int64), adj.indices.astype(np.int32)
         near = np.empty((n, k), dtype=np.int32)
         weights = np.empty((n, k), dtype=np.float32)

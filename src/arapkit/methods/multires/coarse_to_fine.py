@@ -27,17 +27,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...arap.constraints import check_handles, check_targets
+from ...arap.domains import domain_of
 from ...arap.loop import Result
 from ...arap.ringcost import check_ring_memory
 from ...errors import InputError
+from ...mesh.cloud import PointCloud, as_shape
 from ...mesh.model import Mesh
-from ...mesh.weights import DEFAULT_WEIGHTS
 from ...validate import ring_sizes
 from ..deformer import Deformer
-from ..dispatch import MULTIRES_AUTO_VERTICES, register_variant
+from ..dispatch import MULTIRES_AUTO_VERTICES, check_domain, register_variant
 from ..registry import method
 from .binding import Binding, full_tree_of, proxy_rings
-from .decimator import DEFAULT_PROXY_VERTICES, decimation, specks
+from .coarsening import coarsening_of
+from .decimator import DEFAULT_PROXY_VERTICES
 from .handles import HandleMotions, coarse_handles
 from .levels import PROXY_MAX_ITER, FineStages, Level, check_levels
 from .parts import FreeParts
@@ -146,14 +148,17 @@ class MultiresDeformer:
     True
     """
 
-    def __init__(self, mesh: Mesh, handles, rings=1, weights: str = DEFAULT_WEIGHTS, *,
-                 proxy_vertices: int = DEFAULT_PROXY_VERTICES, levels=None,
+    def __init__(self, mesh: Mesh | PointCloud, handles, rings=1, weights: str | None = None,
+                 *, proxy_vertices: int = DEFAULT_PROXY_VERTICES, levels=None,
                  background: bool = False, **options) -> None:
         energy = options.get("energy", "rring")
         if not method(energy).multires:
             raise InputError(f"multires: energy '{energy}' cannot be solved coarse to fine "
                              "(use multires=False)")
         t0 = time.perf_counter()
+        mesh = as_shape(mesh)
+        check_domain(mesh, energy, init=options.get("init", "identity"))
+        self._coarsening = coarsening_of(mesh)
         self.mesh = mesh
         self.energy = energy
         self.handles = check_handles(mesh, handles)
@@ -171,15 +176,16 @@ class MultiresDeformer:
         full = np.asarray(mesh.vertices, dtype=np.float64)
         tree = full_tree_of(full)
         _ = mesh.mean_edge_length
-        left_out = specks(mesh, proxy_vertices)
+        left_out = self._coarsening.specks(mesh, proxy_vertices)
         self._index_handles()
         # needs no proxy: 0.5 s at 1.75M off the wait
         self._parts = FreeParts(mesh, self.handles, options.get("free_components", "follow"),
                                 None if left_out is None else ~left_out)
-        self.proxy_mesh, self._home = decimation(mesh, proxy_vertices)
+        self.proxy_mesh, self._home = self._coarsening.make(mesh, proxy_vertices)
         level_sizes = check_levels(levels, mesh.n_vertices, self.proxy_mesh.n_vertices)
         self.binding = Binding.between(full, self.proxy_mesh.vertices, tree, left_out,
-                                       self._home, self.proxy_mesh.faces)
+                                       self._home,
+                                       proxy_adjacency=self.proxy_mesh.adjacency)
         self.edge_ratio = mesh.mean_edge_length / max(self.proxy_mesh.mean_edge_length, 1e-300)
         self._bind_handles()
         self.stage = ProxyStage(self.proxy_mesh, self._coarse_solver, self._proxy_handles,
@@ -349,6 +355,13 @@ class MultiresDeformer:
     def rings(self) -> np.ndarray:
         """r per vertex of the full mesh."""
         return self._rings
+
+    @property
+    def weights_kind(self) -> str | None:
+        """The full problem's edge weighting (see :attr:`arapkit.Deformer.weights_kind`)."""
+        if self._weights is not None:
+            return self._weights if isinstance(self._weights, str) else None
+        return domain_of(self.mesh).default_weights
 
     @property
     def problem(self):

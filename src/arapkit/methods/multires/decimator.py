@@ -31,6 +31,7 @@ from ...arap.childfactor import child_env
 from ...mesh.model import Mesh
 from ...validate import integer
 from . import decimation_child
+from .coarsening import Coarsening, register_coarsening
 from .decimation_child import simplify as simplify_with_homes
 
 __all__ = ["DEFAULT_PROXY_VERTICES", "decimate", "decimation", "specks", "start_decimation"]
@@ -278,3 +279,6 @@ def decimation(mesh: Mesh, n_target: int = DEFAULT_PROXY_VERTICES) -> tuple[Mesh
         with _cache_lock:
             _store(key, hit)
     return Mesh(hit[0], hit[1], name=f"{mesh.name} proxy"), hit[2]
+
+
+register_coarsening("mesh", Coarsening("decimate", decimation, start_decimation, specks))

@@ -24,6 +24,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
 from ...arap.constraints import rigid_motions
+from ...mesh.cloud import PointCloud
 from ...mesh.model import Mesh
 from .binding import Binding
 
@@ -34,15 +35,18 @@ __all__ = ["FIT_POINTS", "HandleMotions", "coarse_handles", "handle_regions", "r
 FIT_POINTS = 2048
 
 
-def handle_regions(mesh: Mesh, handles: np.ndarray) -> np.ndarray:
+def handle_regions(mesh: Mesh | PointCloud, handles: np.ndarray) -> np.ndarray:
     """The connected region (of the handle vertices' own edges) of each handle."""
     pos = np.full(mesh.n_vertices, -1, dtype=np.int64)
     pos[handles] = np.arange(len(handles))
     # the edges of the faces with two or more handle corners (no sorted edge list built,
-    # nothing the size of all the faces' edges), kept where both ends are handles
-    P = pos[mesh.faces]
+    # nothing the size of all the faces' edges), kept where both ends are handles; a
+    # point cloud's graph edges as they are
+    links = mesh.faces if mesh.faces is not None else mesh.edges
+    P = pos[links]
     P = P[(P >= 0).sum(axis=1) >= 2]
-    pairs = np.concatenate([P[:, [0, 1]], P[:, [1, 2]], P[:, [2, 0]]])
+    c = P.shape[1]
+    pairs = np.concatenate([P[:, [i, (i + 1) % c]] for i in range(c if c > 2 else 1)])
     a, b = pairs[(pairs[:, 0] >= 0) & (pairs[:, 1] >= 0)].T
     n = len(handles)
     graph = coo_matrix((np.ones(len(a)), (a, b)), shape=(n, n))

@@ -35,7 +35,7 @@ from ...mesh.model import Mesh
 from ...validate import integer
 from ..deformer import Deformer
 from .binding import Binding, full_tree_of, proxy_rings
-from .decimator import decimation, specks, start_decimation
+from .coarsening import coarsening_of
 from .handles import coarse_handles
 
 __all__ = ["LEVEL_TOL", "PROXY_MAX_ITER", "FineStages", "Level", "can_overlap", "repose"]
@@ -179,6 +179,7 @@ class FineStages:
                  coarse_solver: CoarseSolver, handles: np.ndarray, rings: np.ndarray,
                  region: np.ndarray) -> None:
         self.mesh = mesh
+        self._coarsening = coarsening_of(mesh)
         self._proxy_mesh, self._home = proxy_mesh, home
         self._level_sizes = level_sizes
         self._weights, self._options = weights, options
@@ -201,20 +202,21 @@ class FineStages:
 
     def _make_levels(self) -> None:
         """Decimate and bind the intermediate meshes (once: they depend on the mesh only)."""
+        coarsen = self._coarsening
         for size in self._level_sizes:  # in a child process: the GIL stays free
-            start_decimation(self.mesh, size)
+            coarsen.start(self.mesh, size)
         full = np.asarray(self.mesh.vertices, dtype=np.float64)
         tree = full_tree_of(full) if self._level_sizes else None
         coarser, coarser_home = self._proxy_mesh, self._home
         for size in self._level_sizes:
-            m, home = decimation(self.mesh, size)
-            down = Binding.between(full, m.vertices, tree, specks(self.mesh, size), home,
-                                   m.faces)
+            m, home = coarsen.make(self.mesh, size)
+            down = Binding.between(full, m.vertices, tree, coarsen.specks(self.mesh, size),
+                                   home, proxy_adjacency=m.adjacency)
             # a level vertex's home on the coarser mesh: that of the full vertex it reads
             up_home = coarser_home[down.near_full]
             self.levels.append(Level(
                 m, Binding.between(m.vertices, coarser.vertices, home=up_home,
-                                   proxy_faces=coarser.faces),
+                                   proxy_adjacency=coarser.adjacency),
                 down, self.mesh.mean_edge_length / max(m.mean_edge_length, 1e-300)))
             coarser, coarser_home = m, home
 
