@@ -396,9 +396,7 @@ class CPUBackend:
         n, K = len(P), p.energy.n_owners
         if len(R) < K:
             R = np.concatenate([R, self._extra_rotations(P)])
-        out = np.empty(K)
-        neighbourhood_energies(P, p.vertices, p.edges, p.w, nbh.edge_ptr, nbh.edge_idx,
-                               self.entry_w, R, out)
+        out = self._neighbourhood_energies(P, R)
         if len(self.rc_ptr):
             k = np.repeat(np.arange(n), np.diff(self.rc_ptr))
             d = ((R[k] - R[self.rc_idx]) ** 2).sum(axis=(1, 2))
@@ -409,14 +407,28 @@ class CPUBackend:
             out = out[:n] + np.bincount(nbh.disk_idx[nbh.disk_ptr[n]:], share, n)
         return out
 
+    def _neighbourhood_energies(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Each owner's own term of the energy (before couplings and sharing)."""
+        p = self.problem
+        nbh = p.energy.nbh
+        out = np.empty(p.energy.n_owners)
+        neighbourhood_energies(P, p.vertices, p.edges, p.w, nbh.edge_ptr, nbh.edge_idx,
+                               self.entry_w, R, out)
+        return out
+
     def _extra_rotations(self, P: np.ndarray) -> np.ndarray:
         """The best rotations of the owners past the vertices for positions P."""
+        return fit_rotations(self._owner_covariances(P, self.problem.energy.nbh.disk_coef))
+
+    def _owner_covariances(self, P: np.ndarray, coef: np.ndarray) -> np.ndarray:
+        """The covariance of each owner past the vertices (a triangle) for positions P."""
         nbh = self.problem.energy.nbh
         n = len(P)
         lo = nbh.disk_ptr[n]
         sizes = np.diff(nbh.disk_ptr[n:])
         owner = np.repeat(np.arange(len(sizes)), sizes)
         d = P[nbh.disk_idx[lo:]] - P[self.centres[owner]]
-        S = np.zeros((len(sizes), 3, 3))
-        np.add.at(S, owner, nbh.disk_coef[lo:, :, None] * d[:, None, :])
-        return fit_rotations(S)
+        dim = P.shape[1]
+        S = np.zeros((len(sizes), dim, dim))
+        np.add.at(S, owner, coef[lo:, :, None] * d[:, None, :])
+        return S

@@ -230,34 +230,15 @@ class PlanarBackend(CPUBackend):
         gather_rows_2d(P, idx, scale, out)
         return out
 
-    def vertex_energy(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
-        """Each vertex's term of the energy (internal numbering); see the CPU backend's."""
+    def _neighbourhood_energies(self, P: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Each owner's own term of the energy in the plane (see the CPU backend's)."""
         p = self.problem
         nbh = p.energy.nbh
-        n, K = len(P), p.energy.n_owners
-        if len(R) < K:
-            R = np.concatenate([R, self._owner_rotations(P)])
-        out = np.empty(K)
+        out = np.empty(p.energy.n_owners)
         neighbourhood_energies_2d(P, self.rest2, p.edges, p.w, nbh.edge_ptr, nbh.edge_idx,
                                   self.entry_w, R, out)
-        if len(self.rc_ptr):
-            k = np.repeat(np.arange(n), np.diff(self.rc_ptr))
-            d = ((R[k] - R[self.rc_idx]) ** 2).sum(axis=(1, 2))
-            out[:n] += np.bincount(k, self.rc_w * d, n)
-        if K > n:
-            sizes = np.diff(nbh.disk_ptr[n:])
-            share = np.repeat(out[n:] / np.maximum(sizes, 1), sizes)
-            out = out[:n] + np.bincount(nbh.disk_idx[nbh.disk_ptr[n]:], share, n)
         return out
 
-    def _owner_rotations(self, P: np.ndarray) -> np.ndarray:
-        """The best rotations of the owners past the vertices for positions P."""
-        nbh = self.problem.energy.nbh
-        n = len(P)
-        lo = nbh.disk_ptr[n]
-        sizes = np.diff(nbh.disk_ptr[n:])
-        owner = np.repeat(np.arange(len(sizes)), sizes)
-        d = P[nbh.disk_idx[lo:]] - P[self.centres[owner]]
-        S = np.zeros((len(sizes), 2, 2))
-        np.add.at(S, owner, self.coef[lo:, :, None] * d[:, None, :])
-        return fit_rotations_2d(S)
+    def _extra_rotations(self, P: np.ndarray) -> np.ndarray:
+        """The best 2 x 2 rotations of the owners past the vertices for positions P."""
+        return fit_rotations_2d(self._owner_covariances(P, self.coef))
