@@ -50,6 +50,7 @@ __all__ = [
     "json_depth",
     "number",
     "parse_json",
+    "point_positions",
     "port",
     "positions_of",
     "quaternion",
@@ -270,6 +271,33 @@ def check_finite_positions(P: np.ndarray, what: str) -> np.ndarray:
         raise InputError(
             f"{what}: vertex {bad[0]} has a non-finite coordinate ({len(bad)} such vertices)"
         )
+    return P
+
+
+def point_positions(values: Any, what: str) -> np.ndarray:
+    """(n, 3) finite float64 positions of a point set, or one line naming the point at fault.
+
+    The one rule for a cloud's points and a fit's target points.
+
+    Examples
+    --------
+    >>> point_positions([[0, 0, 1]], "scan.npy").shape
+    (1, 3)
+    >>> point_positions([[0, 0, float("nan")]], "scan.npy")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: scan.npy: point 0 has a non-finite coordinate [0.0, 0.0, nan]
+    """
+    P = np.array(real_array(values, f"{what}: points"), dtype=np.float64)
+    if P.ndim != 2 or P.shape[1] != 3:
+        raise InputError(f"{what}: points must have shape (n, 3), got {P.shape}")
+    if len(P) == 0:
+        raise InputError(f"{what}: the point cloud is empty")
+    bad = np.flatnonzero(~np.isfinite(P).all(axis=1))
+    if len(bad):
+        raise InputError(f"{what}: point {bad[0]} has a non-finite coordinate "
+                         f"{P[bad[0]].tolist()}"
+                         + (f" ({len(bad)} such points)" if len(bad) > 1 else ""))
     return P
 
 

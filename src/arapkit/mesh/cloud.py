@@ -32,7 +32,7 @@ from functools import cached_property
 import numpy as np
 
 from ..errors import InputError
-from ..validate import integer, number, real_array
+from ..validate import integer, number, point_positions, real_array
 from .attributes import MeshAttributes
 from .model import Mesh, as_mesh, faces_of
 from .neighbours import DEFAULT_NEIGHBOURS, MAX_NEIGHBOURS, check_edges, knn_edges, radius_edges
@@ -40,21 +40,6 @@ from .numbers import bounding_box_diagonal, check_number_range
 from .topology import EdgeTopology
 
 __all__ = ["Graph", "PointCloud", "as_shape", "is_cloud"]
-
-
-def _points(values, name: str) -> np.ndarray:
-    """(n, 3) finite float64 positions, or a one-line error naming the point at fault."""
-    P = np.array(real_array(values, f"{name}: points"), dtype=np.float64)
-    if P.ndim != 2 or P.shape[1] != 3:
-        raise InputError(f"{name}: points must have shape (n, 3), got {P.shape}")
-    if len(P) == 0:
-        raise InputError(f"{name}: the point cloud is empty")
-    bad = np.flatnonzero(~np.isfinite(P).all(axis=1))
-    if len(bad):
-        raise InputError(f"{name}: point {bad[0]} has a non-finite coordinate "
-                         f"{P[bad[0]].tolist()}"
-                         + (f" ({len(bad)} such points)" if len(bad) > 1 else ""))
-    return P
 
 
 def _normals(values, n: int, name: str) -> np.ndarray | None:
@@ -124,7 +109,7 @@ class PointCloud(EdgeTopology):
         self.name = str(name)
         self.notes: list[str] = []
         self.attributes = attributes
-        self.points = _points(points, self.name)
+        self.points = point_positions(points, self.name)
         self.points.setflags(write=False)
         self.normals = _normals(normals, len(self.points), self.name)
         if self.normals is not None:

@@ -31,7 +31,7 @@ from scipy.spatial import cKDTree
 
 from ...errors import InputError
 from ...mesh.model import Mesh, faces_of
-from ...validate import real_array
+from ...validate import point_positions, real_array
 from .closest import PARALLEL_QUERIES, boundary_points, match_disks, match_triangles
 
 __all__ = ["FitTarget", "Matches", "WalkMemo", "as_points"]
@@ -96,17 +96,7 @@ def as_points(values, what: str) -> np.ndarray:
     ...
     arapkit.errors.InputError: scan.npy: point 0 has a non-finite coordinate [0.0, 0.0, nan]
     """
-    P = np.array(real_array(values, what), dtype=np.float64)
-    if P.ndim != 2 or P.shape[1] != 3:
-        raise InputError(f"{what}: expected points of shape (n, 3), got {P.shape}")
-    if len(P) == 0:
-        raise InputError(f"{what}: the point cloud is empty")
-    bad = np.flatnonzero(~np.isfinite(P).all(axis=1))
-    if len(bad):
-        raise InputError(f"{what}: point {bad[0]} has a non-finite coordinate "
-                         f"{P[bad[0]].tolist()}"
-                         + (f" ({len(bad)} such points)" if len(bad) > 1 else ""))
-    return P
+    return point_positions(values, what)
 
 
 def _csr(rows: np.ndarray, cols: np.ndarray, n: int) -> tuple[np.ndarray, np.ndarray]:
