@@ -46,7 +46,7 @@ import numpy as np
 from ..errors import InputError
 from ..mesh.attributes import MeshAttributes
 from .atomic import atomic_write
-from .ply import PLY_TYPES
+from .ply import PLY_TYPES, ply_property_column
 
 __all__ = ["CLOUD_WRITE_FORMATS", "cloud_format", "fit_point_rotations", "save_points",
            "turned_normals"]
@@ -127,16 +127,6 @@ def fit_point_rotations(rest: np.ndarray, edges: np.ndarray,
     return R
 
 
-def _column(name: str, values, n: int) -> np.ndarray:
-    """A per-point value as PLY holds it: n values, int32 for integers, else double."""
-    arr = np.asarray(values)
-    if arr.shape != (n,):
-        raise ValueError(f"vertex property {name!r} has shape {arr.shape}, expected ({n},)")
-    if not name.isidentifier():
-        raise ValueError(f"vertex property name {name!r} is not a plain identifier")
-    return arr.astype(np.int32 if arr.dtype.kind in "iub" else np.float64)
-
-
 def _colours(attrs: MeshAttributes | None) -> np.ndarray | None:
     return None if attrs is None else attrs.colors()
 
@@ -170,7 +160,7 @@ def _ply(V, attrs, normals, props) -> tuple[bytes, list[str]]:
     if normals is not None and not all(c in cols for c in _NORMAL_PROPS):
         cols.update({c: normals[:, i] for i, c in enumerate(_NORMAL_PROPS)})
     for name, values in props.items():
-        cols[name] = _column(name, values, n)
+        cols[name] = ply_property_column(name, values, n)
     dt = [(k, np.dtype(v.dtype).newbyteorder("<").str) for k, v in cols.items()]
     rec = np.empty(n, dtype=dt)
     for k, v in cols.items():

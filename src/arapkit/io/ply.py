@@ -38,7 +38,8 @@ import numpy as np
 
 from ..errors import InputError
 
-__all__ = ["PLY_TYPES", "PlyElement", "PlyFile", "PlyList", "PlyProperty", "read_ply"]
+__all__ = ["PLY_TYPES", "PlyElement", "PlyFile", "PlyList", "PlyProperty", "ply_property_column",
+           "read_ply"]
 
 #: PLY type names -> NumPy type codes: the standard names, their sized aliases, and the
 #: 64-bit and half types that trimesh reads and writes
@@ -589,3 +590,20 @@ def _ascii_element(nums: np.ndarray, t: np.ndarray, el: PlyElement, where, token
     if len(bad):
         i = int(bad[0])
         raise count_error(i, f"the header's properties take {off[i]}")
+
+
+def ply_property_column(name: str, values, n: int) -> np.ndarray:
+    """A vertex property as PLY can hold it: n values, int32 for integers, else double.
+
+    Examples
+    --------
+    >>> ply_property_column("rings", [1, 2], 2).dtype.name
+    'int32'
+    """
+    arr = np.asarray(values)
+    if arr.shape != (n,):
+        raise ValueError(f"vertex property {name!r} has shape {arr.shape}, expected ({n},)")
+    if not name.isidentifier():
+        raise ValueError(f"vertex property name {name!r} is not a plain identifier")
+    # PLY has no 64-bit integers: integers as int32, everything else as double
+    return arr.astype(np.int32 if arr.dtype.kind in "iub" else np.float64)

@@ -42,6 +42,7 @@ from ..validate import positions_of
 from .atomic import atomic_write
 from .cloud_writer import save_points
 from .formats import mesh_format
+from .ply import ply_property_column
 
 __all__ = ["ply_property_column", "save_mesh", "write_with_attributes"]
 
@@ -266,23 +267,6 @@ def write_with_attributes(
 
 
 # --------------------------------------------------------------------------- plain meshes
-
-
-def ply_property_column(name: str, values, n: int) -> np.ndarray:
-    """A vertex property as PLY can hold it: n values, int32 for integers, else double.
-
-    Examples
-    --------
-    >>> ply_property_column("rings", [1, 2], 2).dtype.name
-    'int32'
-    """
-    arr = np.asarray(values)
-    if arr.shape != (n,):
-        raise ValueError(f"vertex property {name!r} has shape {arr.shape}, expected ({n},)")
-    if not name.isidentifier():
-        raise ValueError(f"vertex property name {name!r} is not a plain identifier")
-    # PLY has no 64-bit integers: integers as int32, everything else as double
-    return arr.astype(np.int32 if arr.dtype.kind in "iub" else np.float64)
 
 
 def _ply_bytes(vertices: np.ndarray, faces: np.ndarray, props: Mapping[str, np.ndarray]) -> bytes:
