@@ -204,3 +204,56 @@ def test_sel_def_handles_and_a_rings_file_on_a_cloud(tmp_path, capsys):
     assert np.abs(V - want).max() < 1e-9 * cloud.bounding_box_diagonal
     assert (got["rings"] == rings).all()
     assert np.abs(V[top] - P[top] - [1.5, 0, 0]).max() < 1e-9  # the handles moved
+
+
+def test_info_reports_on_the_graph_asked_for(tmp_path, capsys):
+    """``info --neighbours/--radius`` describes the graph ``deform`` would solve on: two
+    clusters apart are two parts at k = 2 (each point's two nearest are in its own
+    cluster) and one part with a radius that spans the gap (counted by brute force)."""
+    P = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [5, 5, 5], [6, 5, 5], [5, 6, 5.0]])
+    path = tmp_path / "two.xyz"
+    np.savetxt(path, P)
+    for argv, graph, parts, edges in (
+            (["-k", "2"], "kNN, k = 2", 2, 6),
+            (["--radius", "9"], "radius 9", 1,
+             int((np.linalg.norm(P[:, None] - P[None], axis=2) < 9).sum() - 6) // 2)):
+        capsys.readouterr()
+        assert main(["info", str(path), "--json", *argv]) == 0
+        facts = json.loads(capsys.readouterr().out)
+        assert (facts["graph"], facts["components"], facts["edges"]) == (graph, parts, edges)
+    capsys.readouterr()
+    assert main(["info", str(ROOT / "examples" / "cactus.off"), "--neighbours", "4"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.count("\n") == 0 and "this file is a triangle mesh" in err
+
+
+def test_a_clouds_dry_runs_count_points_and_a_meshs_vertices(tmp_path, capsys):
+    """What a dry run prints counts a cloud's points as points (the counts themselves
+    checked against the handle file read by the library), a mesh's as vertices."""
+    groups = ROOT / "examples" / "cactus-groups.json"
+    hs = load_handles(HANDLES, load_points(CLOUD))
+    code, out, err = _deform(capsys, CLOUD, "-H", HANDLES, "--groups", groups, "-o",
+                             tmp_path / "o.ply", "--dry-run")
+    assert code == 0, err
+    assert "(2000 points, box" in out and f"handles: {len(hs.indices)} points in 3" in out
+    assert f"pot: {len(hs.groups[0].indices)} points, fixed" in out
+    assert "rigid part (" in out and " vertices" not in out
+    capsys.readouterr()
+    assert main(["compare", str(CLOUD), "-H", str(HANDLES), "-o", str(tmp_path / "c"),
+                 "--dry-run"]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith("point cloud: ") and " vertices" not in out and " points" in out
+    mesh = ROOT / "examples" / "cactus.off"
+    code, out, err = _deform(capsys, mesh, "-H", HANDLES, "-o", tmp_path / "m.ply",
+                             "--dry-run")
+    assert code == 0 and "(2162 vertices, box" in out and " points" not in out
+
+
+def test_the_editor_counts_a_clouds_selection_in_points():
+    from arapkit.editor.panels import next_step, selected_text
+    from arapkit.editor.state import EditorState
+
+    st = EditorState(load_points(CLOUD))
+    st.selection = np.arange(5)
+    assert selected_text(5, st.mesh) == "Selected: **5** points"
+    assert next_step(st).startswith("**Next:** 5 points selected:")

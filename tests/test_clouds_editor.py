@@ -239,3 +239,34 @@ def test_uploading_a_cloud_file_opens_it(tmp_path, name):
         assert app.dd_weights.value == "gaussian"
     finally:
         app.stop()
+
+
+def test_edit_opens_a_cloud_on_the_graph_asked_for_and_its_session_keeps_it(tmp_path):
+    """``arapkit edit cloud --neighbours K`` (or ``--radius``) solves on that graph, the
+    saved session records it and reopening builds the same graph (its edges compared with
+    the library's cloud on the same option); a session's bad graph and a graph option
+    beside ``--session`` are refused in one line."""
+    from arapkit import InputError
+
+    for opts in ({"neighbours": 6, "radius": None}, {"neighbours": None, "radius": 0.08}):
+        ns = argparse.Namespace(mesh=str(CLOUD), rings_file=None, rings=1, session=None,
+                                handles=None, **opts)
+        st = build_state(ns)
+        lib = load_points(CLOUD, **{k: v for k, v in opts.items() if v is not None})
+        assert np.array_equal(st.mesh.edges, lib.edges)
+        path = st.save_session(tmp_path / "s.json")
+        back = EditorState.from_session(path)
+        assert np.array_equal(back.mesh.edges, lib.edges)
+        assert len(lib.edges) != len(load_points(CLOUD).edges)  # not the default graph
+    d = EditorState.read_session(path)
+    d["graph"] = {"k": 3}
+    import json
+
+    (tmp_path / "bad.json").write_text(json.dumps(d))
+    with pytest.raises(InputError, match="bad.json: 'graph' must hold 'neighbours' or "
+                       "'radius', got \\['k'\\]"):
+        EditorState.from_session(tmp_path / "bad.json")
+    ns = argparse.Namespace(mesh=None, rings_file=None, rings=1, session=str(path),
+                            handles=None, neighbours=8, radius=None)
+    with pytest.raises(InputError, match="a session keeps the graph it was made with"):
+        build_state(ns)

@@ -186,12 +186,16 @@ def run(args: argparse.Namespace) -> int:
 
 def _dry_run(args: argparse.Namespace, mesh, hs, out: Path) -> int:
     """What ``deform --dry-run`` shows, for the comparison's handles; solves nothing."""
+    from arapkit.mesh.cloud import counted
     from arapkit.plots.figures import groups_figure, save_figure
     from arapkit.workflows.jobs import describe_groups
 
-    print(f"mesh: {args.mesh} ({mesh.n_vertices} vertices)")
-    print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
-    for line in describe_groups(mesh.vertices, hs):
+    cloud = mesh.faces is None
+    print(f"{'point cloud' if cloud else 'mesh'}: {args.mesh} "
+          f"({counted(mesh.n_vertices, points=cloud)})")
+    print(f"handles: {counted(len(hs.indices), points=cloud)} in {len(hs.groups)} group(s) "
+          f"from {args.handles}")
+    for line in describe_groups(mesh.vertices, hs, points=cloud):
         print(f"  {line}")
     fig = groups_figure(mesh.vertices, mesh.faces, [(g.name, g.indices) for g in hs.groups],
                         view=args.view, up=args.up,

@@ -430,22 +430,25 @@ def _describe_method(args: argparse.Namespace, r: np.ndarray) -> str:
 
 def _dry_run(args: argparse.Namespace, mesh, hs, rings, groups=None) -> int:
     """Print what the handle file selects and how it moves it; draw it; solve nothing."""
+    from arapkit.mesh.cloud import counted
     from arapkit.mesh.orientation import bounding_box
     from arapkit.workflows.jobs import describe_groups, describe_rings
 
     box = bounding_box(mesh.vertices)
-    kind = "mesh" if mesh.faces is not None else "point cloud"
-    print(f"{kind}: {args.mesh} ({mesh.n_vertices} vertices, box min "
+    cloud = mesh.faces is None
+    kind = "point cloud" if cloud else "mesh"
+    print(f"{kind}: {args.mesh} ({counted(mesh.n_vertices, points=cloud)}, box min "
           f"{_vec(box.min)} max {_vec(box.max)})")
-    print(f"handles: {len(hs.indices)} vertices in {len(hs.groups)} group(s) from {args.handles}")
-    for line in describe_groups(mesh.vertices, hs):
+    print(f"handles: {counted(len(hs.indices), points=cloud)} in {len(hs.groups)} group(s) "
+          f"from {args.handles}")
+    for line in describe_groups(mesh.vertices, hs, points=cloud):
         print(f"  {line}")
     if groups is not None:
-        print(f"groups: {groups.summary()} from {args.groups}")
+        print(f"groups: {groups.summary(points=cloud)} from {args.groups}")
         sizes = groups.sizes
         for i, name in enumerate(groups.names):
             kind = "rigid part" if groups.rigid[i] else "shared rotation"
-            print(f"  {name}: {sizes[i]} vertices, {kind}")
+            print(f"  {name}: {counted(int(sizes[i]), points=cloud)}, {kind}")
     print(f"rings: r = {describe_rings(rings)}; dry run: nothing solved, no mesh written")
     if args.figure:
         from arapkit.plots.figures import groups_figure, save_figure

@@ -70,9 +70,10 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     p.add_argument("--groups", "-G", metavar="G",
                    help="rigid parts and shared-rotation groups to start with (as for "
                    "arapkit deform --groups; paint more with the tool 'Paint part')")
-    from arapkit.cli.common import add_weld_option
+    from arapkit.cli.common import add_graph_options, add_weld_option
 
     add_weld_option(p)
+    add_graph_options(p)
     p.add_argument(
         "--session", metavar="S", help="editor session JSON to resume (names its own mesh)"
     )
@@ -127,11 +128,16 @@ def build_state(args: argparse.Namespace) -> Any:
     if args.session:
         if args.mesh:
             raise InputError("give either MESH or --session (the session names its mesh)")
+        if getattr(args, "neighbours", None) is not None or getattr(args, "radius", None):
+            raise InputError("--neighbours/--radius set the graph of a MESH given here; a "
+                             "session keeps the graph it was made with")
         st = EditorState.from_session(args.session)
     elif args.mesh:
         from arapkit.cli.common import maybe_weld
 
-        shape = load_shape(args.mesh)  # a file without faces: a point cloud
+        # a file without faces: a point cloud, on the graph asked for
+        shape = load_shape(args.mesh, neighbours=getattr(args, "neighbours", None),
+                           radius=getattr(args, "radius", None))
         if shape.faces is None and getattr(args, "weld", None) is not None:
             raise InputError(f"{args.mesh}: --weld merges a mesh's split vertices; a point "
                              "cloud has none")

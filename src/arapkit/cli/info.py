@@ -16,8 +16,9 @@ from typing import Any
 
 import numpy as np
 
-from arapkit.cli.common import add_example_epilog
+from arapkit.cli.common import add_example_epilog, add_graph_options
 from arapkit.io import load_shape
+from arapkit.io.clouds import cloud_formats_text
 from arapkit.io.formats import readable_formats
 
 __all__ = ["add_parser", "inspect_cloud", "inspect_mesh", "run"]
@@ -40,11 +41,17 @@ def add_parser(subparsers: argparse._SubParsersAction) -> argparse.ArgumentParse
         "axis (for writing handle files and reading figures), and what arapkit deform would "
         "do about each problem.",
         **add_example_epilog(
-            ["arapkit info examples/cactus.off", "arapkit info scan.ply.gz --json"]
+            ["arapkit info examples/cactus.off", "arapkit info scan.ply.gz --json",
+             "arapkit info cloud.xyz --neighbours 16"]
         ),
     )
-    p.add_argument("mesh", metavar="MESH", help=f"mesh file ({readable_formats()}; may be .gz)")
+    p.add_argument("mesh", metavar="MESH",
+                   help=f"mesh file ({readable_formats()}; may be .gz), or a point cloud "
+                   f"({cloud_formats_text()}; docs/clouds.md)")
     p.add_argument("--json", action="store_true", help="print the facts as one JSON object")
+    # the graph decides a cloud's components, which the advice is about: the same options
+    # as deform's, so that what info reports is what deform will solve on
+    add_graph_options(p)
     return p
 
 
@@ -224,7 +231,9 @@ def _advice(f: dict[str, Any]) -> list[str]:
 
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit info``; returns the exit status."""
-    shape = load_shape(args.mesh)  # a file without faces is a point cloud
+    # a file without faces is a point cloud, on the graph deform would build
+    shape = load_shape(args.mesh, neighbours=getattr(args, "neighbours", None),
+                       radius=getattr(args, "radius", None))
     facts = inspect_mesh(shape) if shape.faces is not None else inspect_cloud(shape)
     facts["file"] = args.mesh
     if args.json:

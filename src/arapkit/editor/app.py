@@ -37,7 +37,14 @@ from arapkit import validate
 from arapkit.editor.files import MESH_SUFFIXES, FileActions, safe_stem
 from arapkit.editor.geometry import UP_AXES, framing_distance, pick_point, raycast
 from arapkit.editor.groups import GROUP_COLORS, groups_legend_html
-from arapkit.editor.panels import HANDLE_COLOURS, MAX_R, VIEWS, Panels, next_step
+from arapkit.editor.panels import (
+    HANDLE_COLOURS,
+    MAX_R,
+    VIEWS,
+    Panels,
+    next_step,
+    selected_text,
+)
 from arapkit.editor.points import SPLAT_SIZE, CloudNode, cloud_colors, splat_colors
 from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, PointerTools
@@ -492,7 +499,7 @@ class EditorApp(Panels, PointerTools, FileActions):
         if len(st.selection):
             self.show_points("selection", st.selection, SELECT_RGB,
                              self.dot_size(st.selection))
-        self.md_selection.content = f"Selected: **{len(st.selection)}** vertices"
+        self.md_selection.content = selected_text(len(st.selection), st.mesh)
         # the hint follows the selection at once ("press Make handle ...")
         self.md_hint.content = next_step(st)
 

@@ -319,7 +319,8 @@ class FileActions:
     def _upload_groups(self, event: Any) -> None:
         f = self.up_groups.value
         groups = self.load_groups_bytes(f.name, f.content)
-        self.notify(event, "Groups loaded", f"{f.name}: {groups.summary()}")
+        cloud = self.state.mesh.faces is None
+        self.notify(event, "Groups loaded", f"{f.name}: {groups.summary(points=cloud)}")
 
     def _upload_session(self, event: Any) -> None:
         f = self.up_session.value

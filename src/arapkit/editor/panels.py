@@ -37,8 +37,9 @@ from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, find_tool
 from arapkit.editor.topbar import TopBlock
 from arapkit.errors import InputError, worded_for
+from arapkit.mesh.cloud import counted
 
-__all__ = ["MAX_R", "VIEWS", "Panels", "handle_controls", "next_step"]
+__all__ = ["MAX_R", "VIEWS", "Panels", "handle_controls", "next_step", "selected_text"]
 
 VIEWS = ("Shaded", "Rigidity r", "Energy", "Groups")
 #: the largest r the sliders offer: the library's one rule for r
@@ -104,6 +105,18 @@ def _icon_archive_opened_once() -> Iterator[None]:
             z.close()
 
 
+def selected_text(n: int, shape: Any) -> str:
+    """The selection's line under the tools: its count, in points for a point cloud.
+
+    Examples
+    --------
+    >>> from arapkit.mesh.shapes import bar
+    >>> selected_text(3, bar())
+    'Selected: **3** vertices'
+    """
+    return f"Selected: **{n}** " + counted(n, shape).split(" ", 1)[1]
+
+
 def next_step(state: EditorState) -> str:
     """The hint at the top of the panel: what to do next with these handles.
 
@@ -133,7 +146,8 @@ def next_step(state: EditorState) -> str:
                 else "press **Make handle from selection** to move it")
         other = ("(or **Make handle from selection** to move it)" if not fixed
                  else "(or **Make fixed handle from selection** to pin it)")
-        return f"**Next:** {len(state.selection)} vertices selected: {what} {other}."
+        return (f"**Next:** {counted(len(state.selection), state.mesh)} selected: {what} "
+                f"{other}.")
     if not state.handles:
         return ("**Next:** select a region (tool *Select*: click, or Shift+drag a "
                 "rectangle), then **Make handle** to move it or **Make fixed handle** to "
@@ -218,7 +232,7 @@ class Panels:
             # the one promise every tool keeps; the rest is the chosen tool's own help line
             gui.add_markdown("Plain drag orbits the camera, scroll zooms.")
             self.md_tool_help = gui.add_markdown(find_tool(_FIRST_TOOL).help)
-            self.md_selection = gui.add_markdown("Selected: **0** vertices")
+            self.md_selection = gui.add_markdown(selected_text(0, self.state.mesh))
             self.bt_make = gui.add_button("Make handle from selection", icon=viser.Icon.PLUS)
             self.bt_make_fixed = gui.add_button("Make fixed handle from selection",
                                                 icon=viser.Icon.PIN)

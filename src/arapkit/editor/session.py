@@ -25,7 +25,8 @@ from typing import Any
 from arapkit import validate
 from arapkit.errors import InputError
 
-__all__ = ["SESSION_FORMAT", "SESSION_VERSION", "check_header", "read_session", "write_session"]
+__all__ = ["SESSION_FORMAT", "SESSION_VERSION", "check_header", "graph_of", "graph_options",
+           "read_session", "write_session"]
 
 SESSION_FORMAT = "arapkit-editor-session"
 SESSION_VERSION = 1
@@ -74,3 +75,45 @@ def check_header(d: Any, n_vertices: int) -> None:
             f"session: made for a mesh of {made_for!r:.40} vertices, "
             f"the loaded mesh has {n_vertices}"
         )
+
+
+def graph_of(shape: Any) -> dict[str, Any] | None:
+    """A point cloud's graph as a session keeps it (``{"neighbours": k}`` or
+    ``{"radius": r}``); None for a mesh, whose graph is its triangles.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from arapkit.mesh.cloud import PointCloud
+    >>> graph_of(PointCloud(np.eye(3), neighbours=2))
+    {'neighbours': 2}
+    """
+    if getattr(shape, "faces", None) is not None:
+        return None
+    radius = getattr(shape, "radius", None)
+    return {"radius": float(radius)} if radius is not None else {
+        "neighbours": int(shape.neighbours)}
+
+
+def graph_options(d: dict[str, Any], where: str) -> dict[str, Any]:
+    """The ``neighbours`` / ``radius`` keywords of ``load_shape`` from a session's
+    ``"graph"`` (absent in sessions of meshes and of clouds on the default graph).
+
+    The values themselves are checked by the cloud, whose error names them.
+
+    Examples
+    --------
+    >>> graph_options({"graph": {"radius": 0.5}}, "s.json")
+    {'radius': 0.5}
+    >>> graph_options({"graph": {"k": 3}}, "s.json")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: s.json: 'graph' must hold 'neighbours' or 'radius', got ['k']
+    """
+    g = d.get("graph")
+    if g is None:
+        return {}
+    if not isinstance(g, dict) or not g or set(g) - {"neighbours", "radius"}:
+        got = sorted(g) if isinstance(g, dict) else type(g).__name__
+        raise InputError(f"{where}: 'graph' must hold 'neighbours' or 'radius', got {got!r:.60}")
+    return dict(g)

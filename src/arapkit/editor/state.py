@@ -483,6 +483,8 @@ class EditorState:
             # a session on a welded mesh indexes the welded vertices: reopening welds again
             "weld": (None if getattr(self.mesh, "welded_from", None) is None
                      else self.mesh.welded_from.tol),
+            # a cloud's graph (k or a radius) decides its solve: reopening builds the same
+            "graph": session_file.graph_of(self.mesh),
         }
 
     def apply_dict(self, d: dict[str, Any], record: bool = True) -> None:
@@ -532,7 +534,8 @@ class EditorState:
         if not isinstance(mesh_path, str) or "\0" in mesh_path:
             raise InputError(f"{path}: 'mesh' must be a file name, got {mesh_path!r:.60}")
         mesh_file = Path(path).parent / mesh_path
-        mesh = load_shape(str(mesh_file))  # a mesh, or a point cloud
+        # a mesh, or a point cloud on the graph the session was made with
+        mesh = load_shape(str(mesh_file), **session_file.graph_options(d, str(path)))
         if d.get("weld") is not None:
             from arapkit.mesh.welding import weld
 

@@ -39,7 +39,7 @@ from .neighbours import DEFAULT_NEIGHBOURS, MAX_NEIGHBOURS, check_edges, knn_edg
 from .numbers import bounding_box_diagonal, check_number_range
 from .topology import EdgeTopology
 
-__all__ = ["Graph", "PointCloud", "as_shape", "is_cloud"]
+__all__ = ["Graph", "PointCloud", "as_shape", "counted", "is_cloud"]
 
 
 def _normals(values, n: int, name: str) -> np.ndarray | None:
@@ -282,6 +282,22 @@ def is_cloud(shape) -> bool:
     (True, False)
     """
     return isinstance(shape, PointCloud)
+
+
+def counted(n: int, shape=None, *, points: bool | None = None) -> str:
+    """``n`` of a shape's elements in words: points for a cloud (``shape`` a cloud, or
+    ``points=True``), vertices for a mesh; what messages print, so that a cloud's user
+    reads of points.
+
+    Examples
+    --------
+    >>> counted(1, PointCloud(np.eye(3))), counted(4, Mesh(np.eye(3), [[0, 1, 2]]))
+    ('1 point', '4 vertices')
+    """
+    cloud = is_cloud(shape) if points is None else points
+    if cloud:
+        return f"{n} point" if n == 1 else f"{n} points"
+    return f"{n} vertex" if n == 1 else f"{n} vertices"
 
 
 def as_shape(value, what: str = "mesh") -> Mesh | PointCloud:

@@ -197,15 +197,17 @@ class VertexGroups:
         """The names of the groups :meth:`of_kind` numbers, in its order."""
         return tuple(n for n, r in zip(self.names, self.rigid) if bool(r) == rigid)
 
-    def summary(self) -> str:
-        """One line: how many parts and groups, and how many vertices they hold."""
+    def summary(self, points: bool = False) -> str:
+        """One line: how many parts and groups, and how many vertices (``points``: of a
+        point cloud, points) they hold."""
         sizes = self.sizes
         bits = []
         for flag, word in ((True, "rigid part"), (False, "shared-rotation group")):
             k = int((self.rigid == flag).sum())
             if k:
                 held = int(sizes[self.rigid == flag].sum())
-                bits.append(f"{_plural(k, word)} ({_plural(held, 'vertex', 'vertices')})")
+                each = ("point", "points") if points else ("vertex", "vertices")
+                bits.append(f"{_plural(k, word)} ({_plural(held, *each)})")
         return ", ".join(bits) or "no groups"
 
     def remapped(self, index: np.ndarray, n_vertices: int) -> VertexGroups:

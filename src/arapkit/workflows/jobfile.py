@@ -26,6 +26,7 @@ from typing import Any
 from .. import validate
 from ..arap.domains import all_weight_kinds
 from ..errors import InputError
+from ..mesh.cloud import counted
 from ..methods.deformer import INITS, check_method
 from ..methods.registry import method, methods
 from ..validate import iteration_cap, read_input, ring_size, tolerance
@@ -295,10 +296,13 @@ def dry_run(path: str | os.PathLike) -> list[str]:
             lines.append(f"job {i} -> {job['output']}: failed: {error_message(exc)}")
             continue
         hs = inputs.handles
-        lines.append(f"job {i} -> {job['output']}: {job['mesh']} ({inputs.mesh.n_vertices} "
-                     f"vertices), {len(hs.indices)} handle vertices in {len(hs.groups)} "
-                     "group(s)")
-        lines += [f"  {line}" for line in describe_groups(inputs.mesh.vertices, hs)]
+        cloud = inputs.mesh.faces is None
+        lines.append(f"job {i} -> {job['output']}: {job['mesh']} "
+                     f"({counted(inputs.mesh.n_vertices, points=cloud)}), "
+                     f"{len(hs.indices)} handle {'points' if cloud else 'vertices'} in "
+                     f"{len(hs.groups)} group(s)")
+        lines += [f"  {line}" for line in describe_groups(inputs.mesh.vertices, hs,
+                                                          points=cloud)]
         if inputs.groups is not None:
-            lines.append(f"  vertex groups: {inputs.groups.summary()}")
+            lines.append(f"  vertex groups: {inputs.groups.summary(points=cloud)}")
     return lines

@@ -38,6 +38,7 @@ import numpy as np
 from .. import __version__
 from ..arap.domains import domain_of
 from ..errors import Advice, InputError, worded_for
+from ..mesh.cloud import counted
 from ..methods.deformer import Deformer
 from ..methods.registry import method_names
 
@@ -443,8 +444,9 @@ def _groups_report(job: DeformJob, prepared: PreparedJob) -> dict[str, Any]:
     }}
 
 
-def describe_groups(vertices: np.ndarray, hs) -> list[str]:
-    """One line per handle group: name, vertex count, motion (what a dry run prints).
+def describe_groups(vertices: np.ndarray, hs, points: bool = False) -> list[str]:
+    """One line per handle group: name, vertex count (``points``: of a point cloud, point
+    count), motion (what a dry run prints).
 
     Examples
     --------
@@ -459,7 +461,7 @@ def describe_groups(vertices: np.ndarray, hs) -> list[str]:
     lines = []
     for g in hs.groups:
         n = len(g.indices)
-        head = f"{g.name}: {n} vertex" if n == 1 else f"{g.name}: {n} vertices"
+        head = f"{g.name}: {counted(n, points=points)}"
         d = np.asarray(g.targets) - vertices[g.indices]
         if g.kind == "fixed" or not np.any(d):
             lines.append(f"{head}, fixed")
