@@ -441,3 +441,81 @@ def test_cli_dry_run_lists_the_groups(capsys):
     out = capsys.readouterr().out
     assert code == 0 and "left arm: 440 vertices, rigid part" in out
     assert "right arm: 368 vertices, shared rotation" in out
+
+
+def _bone_case():
+    """The 7 m bar bent by 90 degrees with its middle 2 m a rigid bone."""
+    from scipy.spatial.transform import Rotation
+
+    m = bar()
+    V, x = m.vertices, m.vertices[:, 0]
+    lo, hi = np.flatnonzero(x < 0.3), np.flatnonzero(x > x.max() - 0.3)
+    R = Rotation.from_euler("z", 90, degrees=True).as_matrix()
+    t = np.r_[V[lo], (V[hi] - V[hi].mean(0)) @ R.T + [0.6 * x.max(), 0.4 * x.max(), 0]]
+    bone = np.flatnonzero(np.abs(x - 3.5) < 1.0)
+    return m, np.r_[lo, hi], t, bone
+
+
+def test_anderson_extrapolates_the_parts_rotations_with_the_positions():
+    """With a rigid bone, Anderson acceleration extrapolates the parts' rotations beside the
+    positions: it needs well under half the plain iterations (positions alone: 219
+    against 238), the energy never rises and the end is the tightly converged solve's."""
+    m, h, t, bone = _bone_case()
+    g = VertexGroups.from_lists([("bone", bone, True)], m.n_vertices)
+    plain = Deformer(m, h, groups=g).solve(t, max_iter=5000)
+    fast = Deformer(m, h, groups=g, accelerate=True).solve(t, max_iter=5000)
+    ref = Deformer(m, h, groups=g).solve(t, tol=1e-10, max_iter=50000)
+    assert plain.converged and fast.converged and ref.converged
+    assert fast.iterations <= 0.5 * plain.iterations
+    assert _monotone(fast.history) and _stretch(m, fast.vertices, bone) < RIGID_TOL
+    assert np.abs(fast.vertices[h] - t).max() < 1e-12
+    # the default stop (tol 1e-3) of the accelerated solve is nearer the minimum than the
+    # plain one's (measured: 5 % above it against 11 %)
+    assert ref.energy <= fast.energy <= plain.energy
+    assert fast.energy - ref.energy < 0.6 * (plain.energy - ref.energy)
+
+
+@pytest.mark.parametrize("kind", ["pivot", "hinge"])
+def test_accelerated_held_parts_turn_only_as_their_handles_allow(small_bar, kind):
+    """A pivot's or a hinge's extrapolated rotation keeps its handles where they are
+    (a held part takes the plain step's rotation): the accelerated solve reaches the plain
+    solve's minimum with the handles exact."""
+    m, h, t, A, _ = small_bar
+    V = m.vertices
+    line = A[(np.abs(V[A, 0] - V[A[0], 0]) < 1e-9) & (np.abs(V[A, 2] - V[A[0], 2]) < 1e-9)]
+    inner = {"pivot": A[:1], "hinge": line[:2]}[kind]
+    hh = np.concatenate([h, inner])
+    tt = np.concatenate([t, V[inner] + [0.0, 0.3, 0.1]])
+    g = VertexGroups.from_lists([("A", A, True)], m.n_vertices)
+    ref = Deformer(m, hh, groups=g).solve(tt, tol=1e-12, max_iter=50000)
+    fast = Deformer(m, hh, groups=g, accelerate=True).solve(tt, tol=1e-12, max_iter=50000)
+    assert fast.converged and _monotone(fast.history)
+    assert fast.iterations < ref.iterations
+    assert np.abs(fast.vertices[hh] - tt).max() < 1e-9 * m.bounding_box_diagonal
+    assert _stretch(m, fast.vertices, A) < RIGID_TOL
+    assert fast.energy == pytest.approx(ref.energy, rel=1e-8)
+
+
+def test_an_extrapolated_rotation_is_a_rotation_and_held_parts_keep_the_plain_one(small_bar):
+    """``PartSystem.extrapolated``: a free part gets the rotation nearest the extrapolated
+    matrix (its polar factor, computed here by SVD), a hinge-held one the plain step's."""
+    from arapkit.arap.parts import FREE, HINGE
+
+    m, h, t, A, B = small_bar
+    V = m.vertices
+    line = A[(np.abs(V[A, 0] - V[A[0], 0]) < 1e-9) & (np.abs(V[A, 2] - V[A[0], 2]) < 1e-9)]
+    hh = np.concatenate([h, line[:2]])
+    g = VertexGroups.from_lists([("A", A, True), ("B", B, True)], m.n_vertices)
+    ps = Deformer(m, hh, groups=g).problem.part_system
+    assert sorted(ps.holds.kind.tolist()) == [FREE, HINGE]
+    rng = np.random.default_rng(3)
+    Aex = np.eye(3) + 0.3 * rng.normal(size=(2, 3, 3))
+    plain = np.stack([np.eye(3), np.eye(3)[[1, 0, 2]] * [[1], [-1], [1]]])
+    out = ps.extrapolated(Aex, plain)
+    for k in range(2):
+        if ps.holds.kind[k] == HINGE:
+            assert np.array_equal(out[k], plain[k])
+        else:
+            U, _, Wt = np.linalg.svd(Aex[k])
+            D = np.diag([1, 1, np.sign(np.linalg.det(U @ Wt))])
+            assert np.abs(out[k] - U @ D @ Wt).max() < 1e-12

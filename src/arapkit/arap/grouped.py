@@ -304,6 +304,23 @@ class GroupedBackend:
                 E = max(E, 0.0)
         return E
 
+    @property
+    def part_rows(self) -> int:
+        """Rows of three the rigid parts' rotations add to an accelerated iterate (0
+        without parts): :func:`~arapkit.arap.loop.local_global` extrapolates them with the
+        positions, as the dynamics does (:mod:`arapkit.arap.dynamics`)."""
+        return 0 if self._ps is None else 3 * self._ps.layout.n_parts
+
+    def placed_rotations(self) -> np.ndarray | None:
+        """(parts, 3, 3) the rotations the parts are placed with at the next scatter (those
+        of the last right-hand side); None before the solve's first local step."""
+        return self.R_rhs if self._ps is not None else None
+
+    def extrapolated_rotations(self, A: np.ndarray, plain: np.ndarray) -> np.ndarray:
+        """The parts' rotations of an extrapolated iterate
+        (:meth:`~arapkit.arap.parts.PartSystem.extrapolated`)."""
+        return self._ps.extrapolated(A, plain)
+
     def rhs(self, fixed_rhs: np.ndarray, rhs: np.ndarray) -> None:
         """The reduced right-hand side from the last local step."""
         ps = self._ps

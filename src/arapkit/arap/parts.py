@@ -377,6 +377,29 @@ class PartSystem:
         """The entries of ``layout.verts`` in moving parts."""
         return np.flatnonzero(self.holds.kind[self.layout.vert_part] != FIXED)
 
+    def extrapolated(self, A: np.ndarray, plain: np.ndarray) -> np.ndarray:
+        """The parts' rotations of an extrapolated iterate (Anderson's): the rotation
+        nearest ``A`` (k, 3, 3) for a free part, ``plain``'s (the plain step's) for a held
+        one, whose rotation its handles constrain (a hinge turns about its line only).
+
+        Examples
+        --------
+        >>> from arapkit.arap.problem import ARAPProblem
+        >>> from arapkit.mesh.shapes import bar
+        >>> p = ARAPProblem.from_mesh(bar(segments=(8, 2, 2)), [0])
+        >>> part = np.full(p.n_vertices, -1); part[p.iperm[40:60]] = 0
+        >>> ps = PartSystem.build(PartLayout.build(p.graph, part, ("m",)), p.graph,
+        ...                       p.energy.system_w, p.iperm[[0]], "bar")
+        >>> R = ps.extrapolated(np.array([[[1.1, 0.1, 0], [-0.1, 0.9, 0], [0, 0, 1.0]]]),
+        ...                     np.eye(3)[None])
+        >>> round(float(np.linalg.det(R[0])), 12), bool(np.allclose(R[0] @ R[0].T, np.eye(3)))
+        (1.0, True)
+        """
+        out = nearest_rotations(np.ascontiguousarray(A))
+        held = self.holds.kind != FREE
+        out[held] = plain[held]
+        return out
+
     def sync(self, P: np.ndarray) -> np.ndarray:
         """The parts' rotations fitted to ``P`` (a start shape), with ``P`` made rigid on
         them: free parts by their best rigid fit, held ones about their centre."""
