@@ -473,6 +473,13 @@ def test_anderson_extrapolates_the_parts_rotations_with_the_positions():
     # plain one's (measured: 5 % above it against 11 %)
     assert ref.energy <= fast.energy <= plain.energy
     assert fast.energy - ref.energy < 0.6 * (plain.energy - ref.energy)
+    # a solve from rest starts from rest also after another solve on the same deformer
+    # (its parts are not placed with the last solve's rotations): the same iterates
+    d = Deformer(m, h, groups=g, accelerate=True)
+    d.solve(t[::-1].copy(), max_iter=30)
+    again = d.solve(t, max_iter=5000)
+    assert again.iterations == fast.iterations
+    assert np.abs(again.vertices - fast.vertices).max() < 1e-12 * m.bounding_box_diagonal
 
 
 @pytest.mark.parametrize("kind", ["pivot", "hinge"])

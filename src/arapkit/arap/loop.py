@@ -298,17 +298,19 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
     # with rigid parts an accelerated iterate also holds the rotations they are placed with
     # (three rows of three each): extrapolating the positions alone places the parts with
     # stale rotations, and the safeguard refuses nearly every extrapolation (a bone in the
-    # bar bent by 90 degrees: 219 accelerated iterations against 238 plain)
+    # bar bent by 90 degrees: 391 accelerated iterations against 418 plain; now 52)
     nr = getattr(backend, "part_rows", 0) if accelerate and nf and d == 3 else 0
     aa = Anderson(d * (nf + nr), history) if accelerate and nf else None
     x = np.empty((nf + nr, d))  # current iterate (free vertices, then parts' rotations)
     x[:nf] = P[free]
-    if nr:
-        # the start's rotations (from rest there are none yet: the first step is plain and
-        # its result replaces x before Anderson reads it)
-        placed = backend.placed_rotations()
-        x[nf:] = np.eye(3)[None].repeat(nr // 3, 0).reshape(-1, 3) if placed is None \
-            else placed.reshape(-1, 3)
+    # whether this solve's local step has fitted the parts' rotations yet: from a start it
+    # has; from rest the first step is plain, and its result replaces x before Anderson
+    # reads it (the backend's rotations are then a previous solve's)
+    turned = bool(nr) and start is not None
+    if turned:
+        x[nf:] = backend.placed_rotations().reshape(-1, 3)
+    elif nr:
+        x[nf:] = np.tile(np.eye(3), (nr // 3, 1))
     g = np.empty((nf + nr, d))
     x_aa = np.empty((nf + nr, d))
     hist: list[float] = []
@@ -323,9 +325,7 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
         t0 = time.perf_counter()
         if nf:
             backend.solve(rhs, g[:nf] if nr else g)  # g = G(x)
-            # ... and the rotations the parts are placed with there (none yet from rest)
-            turned = nr and backend.placed_rotations() is not None
-            if turned:
+            if turned:  # ... and the rotations the parts are placed with there
                 g[nf:] = backend.placed_rotations().reshape(-1, 3)
         if guard is not None:  # the guarded step (module flips)
             guard.limit(P, g, free, cons, C, E_prev, R_prev)
@@ -373,6 +373,7 @@ def local_global(problem, backend, targets: np.ndarray, start: np.ndarray | None
             else:  # the first step from rest: the parts' rotations are fitted to it
                 backend.scatter(g[:nf], free, P)
                 g[nf:] = backend.placed_rotations().reshape(-1, 3)
+                turned = True
             E = backend.local(P, R, R_prev)
             if guard is not None:
                 E += guard.barrier(P)
