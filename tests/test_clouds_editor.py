@@ -270,3 +270,29 @@ def test_edit_opens_a_cloud_on_the_graph_asked_for_and_its_session_keeps_it(tmp_
                             handles=None, neighbours=8, radius=None)
     with pytest.raises(InputError, match="a session keeps the graph it was made with"):
         build_state(ns)
+
+
+def test_arapkit_edit_opens_a_cloud_from_the_command_line(capsys, monkeypatch):
+    """The command line's own door (``run``, not only ``build_state``): a file without
+    faces opens in the 3D editor on the graph asked for (it was read as a mesh for the
+    2D check and refused)."""
+    import socket
+
+    import arapkit.editor.app as app_mod
+    from arapkit.cli import main
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    served = []
+
+    def serve(self):
+        served.append(self.state)
+        self.stop()
+
+    monkeypatch.setattr(app_mod.EditorApp, "serve_forever", serve)
+    assert main(["edit", str(CLOUD), "-k", "6", "--port", str(port)]) == 0, \
+        capsys.readouterr().err
+    (st,) = served
+    assert st.mesh.faces is None and st.n == 2000
+    assert np.array_equal(st.mesh.edges, load_points(CLOUD, neighbours=6).edges)

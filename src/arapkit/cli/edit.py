@@ -109,8 +109,11 @@ def add_parser(subparsers: Any) -> argparse.ArgumentParser:
     return p
 
 
-def build_state(args: argparse.Namespace) -> Any:
+def build_state(args: argparse.Namespace, shape: Any = None) -> Any:
     """The editor state the command line asks for (raises InputError on bad files).
+
+    ``shape``: ``args.mesh`` already loaded (as :func:`~arapkit.io.load_shape` loads it
+    with the graph options), so that a large file is not read twice.
 
     Examples
     --------
@@ -135,9 +138,9 @@ def build_state(args: argparse.Namespace) -> Any:
     elif args.mesh:
         from arapkit.cli.common import maybe_weld
 
-        # a file without faces: a point cloud, on the graph asked for
-        shape = load_shape(args.mesh, neighbours=getattr(args, "neighbours", None),
-                           radius=getattr(args, "radius", None))
+        if shape is None:  # a file without faces: a point cloud, on the graph asked for
+            shape = load_shape(args.mesh, neighbours=getattr(args, "neighbours", None),
+                               radius=getattr(args, "radius", None))
         if shape.faces is None and getattr(args, "weld", None) is not None:
             raise InputError(f"{args.mesh}: --weld merges a mesh's split vertices; a point "
                              "cloud has none")
@@ -220,6 +223,7 @@ def run(args: argparse.Namespace) -> int:
     """Start the editor and serve until Ctrl-C."""
     # the editor serves with viser and colours energy with matplotlib's maps
     require_extra(("viser", "matplotlib"), "editor", "arapkit edit")
+    loaded = None
     if args.mesh and not args.session:
         from arapkit.validate import host as check_host
 
@@ -228,19 +232,22 @@ def run(args: argparse.Namespace) -> int:
             require_extra(["PIL", "skimage", "shapely", "pythoncdt"], "image",
                           "arapkit edit on a picture")
             return _run_2d(args, args.mesh)
-        from arapkit import load_mesh
+        from arapkit.io import load_shape
         from arapkit.mesh.planar import is_planar
 
-        mesh = load_mesh(args.mesh)
-        if is_planar(mesh.vertices) and not args.handles and not args.rings_file:
+        # a file without faces is a point cloud: the 3D editor, whatever its shape
+        loaded = load_shape(args.mesh, neighbours=getattr(args, "neighbours", None),
+                            radius=getattr(args, "radius", None))
+        if (loaded.faces is not None and is_planar(loaded.vertices) and not args.handles
+                and not args.rings_file):
             require_extra(["PIL", "skimage", "shapely", "pythoncdt"], "image",
                           "arapkit edit on a planar mesh")
-            return _run_2d(args, mesh)
+            return _run_2d(args, loaded)
     from arapkit.editor.app import EditorApp
     from arapkit.validate import host
 
     host(args.host, "--host")  # before anything starts: a server that cannot bind hangs
-    state = build_state(args)
+    state = build_state(args, loaded)
     if args.host not in ("127.0.0.1", "localhost", "::1"):
         print(
             f"arapkit: warning: serving on {args.host}: anyone who can reach this "
