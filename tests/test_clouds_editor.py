@@ -64,7 +64,7 @@ def test_a_cloud_is_drawn_as_splats_and_dragged_as_the_library_solves(tmp_path):
         assert app.wait_idle(120)
         st = app.state
         assert isinstance(app.mesh_node, CloudNode) and app._groups == []
-        assert "a point cloud (kNN, k = 10)" in app.mesh_info()
+        assert "2,000 points, a point cloud (kNN, k = 10)" in app.mesh_info()
         # the shaded view shows the file's own colours
         src = st.mesh.attributes.vertex_properties
         assert np.array_equal(app.mesh_node.colors[:, 0], src["red"])
@@ -293,6 +293,7 @@ def test_arapkit_edit_opens_a_cloud_from_the_command_line(capsys, monkeypatch):
     monkeypatch.setattr(app_mod.EditorApp, "serve_forever", serve)
     assert main(["edit", str(CLOUD), "-k", "6", "--port", str(port)]) == 0, \
         capsys.readouterr().err
+    assert "(point cloud cactus-points.ply, 2000 points; " in capsys.readouterr().out
     (st,) = served
     assert st.mesh.faces is None and st.n == 2000
     assert np.array_equal(st.mesh.edges, load_points(CLOUD, neighbours=6).edges)

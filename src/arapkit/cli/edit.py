@@ -244,6 +244,7 @@ def run(args: argparse.Namespace) -> int:
                           "arapkit edit on a planar mesh")
             return _run_2d(args, loaded)
     from arapkit.editor.app import EditorApp
+    from arapkit.mesh.cloud import counted
     from arapkit.validate import host
 
     host(args.host, "--host")  # before anything starts: a server that cannot bind hangs
@@ -263,7 +264,8 @@ def run(args: argparse.Namespace) -> int:
         up=_up(getattr(args, "up", None)),
     )
     print(
-        f"arapkit editor: {app.url}  (mesh {state.mesh.name}, {state.n} vertices; "
+        f"arapkit editor: {app.url}  ({'mesh' if state.mesh.faces is not None else 'point cloud'}"
+        f" {state.mesh.name}, {counted(state.n, state.mesh)}; "
         f"exports go to {app.export_dir}; Ctrl-C to stop)",
         flush=True,
     )

@@ -347,9 +347,9 @@ class EditorApp(Panels, PointerTools, FileActions):
         """The panel's line about the loaded mesh (name, size, loader notes)."""
         m = self.state.mesh
         notes = "; ".join(getattr(m, "notes", [])[:3])
-        size = (f"{m.n_faces:,} faces" if m.faces is not None else
-                f"a point cloud ({m.graph_description})")
-        return (f"**{m.name}**: {m.n_vertices:,} vertices, {size}"
+        cloud = m.faces is None
+        size = f"a point cloud ({m.graph_description})" if cloud else f"{m.n_faces:,} faces"
+        return (f"**{m.name}**: {m.n_vertices:,} {'points' if cloud else 'vertices'}, {size}"
                 + (f"  \n_{notes}_" if notes else ""))
 
     def redraw(self) -> None:
