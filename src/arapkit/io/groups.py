@@ -36,7 +36,7 @@ import numpy as np
 from ..errors import InputError
 from ..mesh.groups import VertexGroups
 from ..mesh.selection import short_name
-from ..validate import check_input_size, parse_json, positions_of, read_input
+from ..validate import check_input_size, existing_file, parse_json, positions_of, read_input
 from .arrays import load_numpy
 from .atomic import write_json
 from .handles import COMMENT_KEY, SELECTION_KEYS, select_vertices
@@ -196,12 +196,8 @@ def load_groups(path: str | os.PathLike, vertices, welded: Any = None) -> Vertex
     >>> load_groups(p, np.zeros((3, 3))).ids.tolist()
     [-1, -1, 0]
     """
-    path = Path(path)
+    path = existing_file(path)
     name = path.name.lower()
-    if "\0" in str(path):
-        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)")
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
     V = np.asarray(positions_of(vertices), dtype=np.float64)
     n = len(V)
     if name.endswith(".json"):

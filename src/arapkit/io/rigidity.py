@@ -20,7 +20,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..validate import check_input_size, ring_sizes
+from ..validate import check_input_size, existing_file, ring_sizes
 from .arrays import load_numpy
 from .atomic import atomic_write
 from .readers import read_ply_vertex_properties
@@ -70,12 +70,8 @@ def load_rings(path: str | os.PathLike, n_vertices: int) -> np.ndarray:
     >>> load_rings(p, 3).tolist()
     [1, 2, 6]
     """
-    path = Path(path)
+    path = existing_file(path)
     name = path.name.lower()
-    if "\0" in str(path):
-        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)")
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
     if name.endswith(".npy"):
         check_input_size(path.stat().st_size, path, "rings files")
         values = load_numpy(path)
