@@ -27,7 +27,6 @@ import numbers
 import os
 import re
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -43,7 +42,6 @@ __all__ = [
     "MAX_UPLOAD_MB",
     "check_finite_positions",
     "check_input_size",
-    "existing_file",
     "handle_indices",
     "host",
     "input_cap_mb",
@@ -535,25 +533,6 @@ def input_cap_mb() -> float:
     if text is None:
         return MAX_INPUT_MB
     return number(text, INPUT_CAP_VARIABLE, lo=0.0, lo_open=True)
-
-
-def existing_file(path: str | os.PathLike) -> Path:
-    """``path`` as a :class:`~pathlib.Path`, refused in one line when its name holds a NUL
-    byte or nothing is there (what loaders that dispatch on the suffix check first).
-
-    Examples
-    --------
-    >>> existing_file("/no/such/r.txt")
-    Traceback (most recent call last):
-    ...
-    arapkit.errors.InputError: /no/such/r.txt: file not found
-    """
-    if "\0" in str(path):
-        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)")
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: file not found")
-    return path
 
 
 def read_input(path: str | os.PathLike, what: str = "input files") -> bytes:

@@ -1,5 +1,6 @@
 """The file formats arapkit reads and writes: one list each, read by the readers, the writers,
-the CLI's help and every message that names them.
+the CLI's help and every message that names them; and the check a loader that dispatches on
+the suffix makes first (:func:`existing_file`).
 
 Examples
 --------
@@ -21,6 +22,7 @@ __all__ = [
     "MESH_FORMATS",
     "READ_FORMATS",
     "check_figure_format",
+    "existing_file",
     "is_readable_mesh",
     "mesh_format",
     "readable_formats",
@@ -96,3 +98,22 @@ def mesh_format(path: str | os.PathLike) -> tuple[str, bool]:
             + ")"
         )
     return ext, gz
+
+
+def existing_file(path: str | os.PathLike) -> Path:
+    """``path`` as a :class:`~pathlib.Path`, refused in one line when its name holds a NUL
+    byte or nothing is there (what loaders that dispatch on the suffix check first).
+
+    Examples
+    --------
+    >>> existing_file("/no/such/r.txt")
+    Traceback (most recent call last):
+    ...
+    arapkit.errors.InputError: /no/such/r.txt: file not found
+    """
+    if "\0" in str(path):
+        raise InputError(f"{str(path)!r}: not a usable file name (NUL byte)")
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: file not found")
+    return path

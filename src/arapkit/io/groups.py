@@ -36,9 +36,10 @@ import numpy as np
 from ..errors import InputError
 from ..mesh.groups import VertexGroups
 from ..mesh.selection import short_name
-from ..validate import check_input_size, existing_file, parse_json, positions_of, read_input
+from ..validate import check_input_size, parse_json, positions_of, read_input
 from .arrays import load_numpy
 from .atomic import write_json
+from .formats import existing_file
 from .handles import COMMENT_KEY, SELECTION_KEYS, select_vertices
 from .readers import read_ply_vertex_properties
 from .text import int_tokens

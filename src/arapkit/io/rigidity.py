@@ -20,9 +20,10 @@ from typing import Any
 import numpy as np
 
 from ..errors import InputError
-from ..validate import check_input_size, existing_file, ring_sizes
+from ..validate import check_input_size, ring_sizes
 from .arrays import load_numpy
 from .atomic import atomic_write
+from .formats import existing_file
 from .readers import read_ply_vertex_properties
 from .text import int_tokens
 
