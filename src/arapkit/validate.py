@@ -274,10 +274,14 @@ def check_finite_positions(P: np.ndarray, what: str) -> np.ndarray:
     return P
 
 
-def point_positions(values: Any, what: str) -> np.ndarray:
+def point_positions(values: Any, what: str, nouns: tuple[str, str] = ("point", "points"),
+                    empty: str = "the point cloud is empty") -> np.ndarray:
     """(n, 3) finite float64 positions of a point set, or one line naming the point at fault.
 
-    The one rule for a cloud's points and a fit's target points.
+    The one rule for a cloud's points, a fit's target points and a mesh's vertices
+    (``nouns=("vertex", "vertices")``, ``empty`` its own message): text, objects, complex
+    numbers and booleans are refused (numpy would parse strings and drop imaginary parts
+    without a word), as are a wrong shape, no point at all and a non-finite coordinate.
 
     Examples
     --------
@@ -288,16 +292,17 @@ def point_positions(values: Any, what: str) -> np.ndarray:
     ...
     arapkit.errors.InputError: scan.npy: point 0 has a non-finite coordinate [0.0, 0.0, nan]
     """
-    P = np.array(real_array(values, f"{what}: points"), dtype=np.float64)
+    one, many = nouns
+    P = np.array(real_array(values, f"{what}: {many}"), dtype=np.float64)
     if P.ndim != 2 or P.shape[1] != 3:
-        raise InputError(f"{what}: points must have shape (n, 3), got {P.shape}")
+        raise InputError(f"{what}: {many} must have shape (n, 3), got {P.shape}")
     if len(P) == 0:
-        raise InputError(f"{what}: the point cloud is empty")
+        raise InputError(f"{what}: {empty}")
     bad = np.flatnonzero(~np.isfinite(P).all(axis=1))
     if len(bad):
-        raise InputError(f"{what}: point {bad[0]} has a non-finite coordinate "
+        raise InputError(f"{what}: {one} {bad[0]} has a non-finite coordinate "
                          f"{P[bad[0]].tolist()}"
-                         + (f" ({len(bad)} such points)" if len(bad) > 1 else ""))
+                         + (f" ({len(bad)} such {many})" if len(bad) > 1 else ""))
     return P
 
 

@@ -19,7 +19,7 @@ import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
 from ..errors import InputError
-from ..validate import real_array
+from ..validate import point_positions, real_array
 from .attributes import MeshAttributes
 from .numbers import (
     COORDINATE_RANGE,
@@ -123,20 +123,9 @@ class Mesh(EdgeTopology):
 
     # -- validation -------------------------------------------------------
     def _check_vertices(self, vertices) -> np.ndarray:
-        # one rule for every entry point: text, objects, complex numbers and booleans are
-        # refused (numpy would parse strings and drop imaginary parts without a word)
-        V = np.array(real_array(vertices, f"{self.name}: vertices"), dtype=np.float64)
-        if V.ndim != 2 or V.shape[1] != 3:
-            raise InputError(f"{self.name}: vertices must have shape (n, 3), got {V.shape}")
-        if len(V) == 0:
-            raise InputError(f"{self.name}: mesh has no vertices")
-        bad = np.flatnonzero(~np.isfinite(V).all(axis=1))
-        if len(bad):
-            raise InputError(
-                f"{self.name}: vertex {bad[0]} has a non-finite coordinate {V[bad[0]].tolist()}"
-                + (f" ({len(bad)} such vertices)" if len(bad) > 1 else "")
-            )
-        return V
+        # the point sets' one rule (a cloud's points are checked alike), worded for a mesh
+        return point_positions(vertices, self.name, ("vertex", "vertices"),
+                               "mesh has no vertices")
 
     def _check_faces(self, faces) -> np.ndarray:
         n = len(self.vertices)
