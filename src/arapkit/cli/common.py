@@ -18,6 +18,7 @@ __all__ = [
     "RingProgress",
     "add_graph_options",
     "add_weld_option",
+    "graph_options",
     "add_view_options",
     "iteration_cap",
     "maybe_weld",
@@ -153,6 +154,19 @@ def add_graph_options(p: argparse.ArgumentParser) -> None:
                    f"(symmetrised; default {DEFAULT_NEIGHBOURS})")
     g.add_argument("--radius", type=positive_float, default=None, metavar="R",
                    help="a point cloud's graph: every pair of points closer than R instead")
+
+
+def graph_options(args: argparse.Namespace) -> dict[str, Any]:
+    """The ``neighbours`` / ``radius`` keywords of :func:`arapkit.io.load_shape` that
+    :func:`add_graph_options` parsed (None each where not given, or not offered).
+
+    Examples
+    --------
+    >>> graph_options(argparse.Namespace(neighbours=6))
+    {'neighbours': 6, 'radius': None}
+    """
+    return {"neighbours": getattr(args, "neighbours", None),
+            "radius": getattr(args, "radius", None)}
 
 
 def maybe_weld(mesh, tol: float | None):

@@ -19,7 +19,7 @@ from typing import Any
 
 import numpy as np
 
-from arapkit.cli.common import add_example_epilog, port, ring_size, upload_mb
+from arapkit.cli.common import add_example_epilog, graph_options, port, ring_size, upload_mb
 from arapkit.errors import require_extra
 
 _DESCRIPTION = """\
@@ -131,7 +131,7 @@ def build_state(args: argparse.Namespace, shape: Any = None) -> Any:
     if args.session:
         if args.mesh:
             raise InputError("give either MESH or --session (the session names its mesh)")
-        if getattr(args, "neighbours", None) is not None or getattr(args, "radius", None):
+        if any(v is not None for v in graph_options(args).values()):
             raise InputError("--neighbours/--radius set the graph of a MESH given here; a "
                              "session keeps the graph it was made with")
         st = EditorState.from_session(args.session)
@@ -139,8 +139,7 @@ def build_state(args: argparse.Namespace, shape: Any = None) -> Any:
         from arapkit.cli.common import maybe_weld
 
         if shape is None:  # a file without faces: a point cloud, on the graph asked for
-            shape = load_shape(args.mesh, neighbours=getattr(args, "neighbours", None),
-                               radius=getattr(args, "radius", None))
+            shape = load_shape(args.mesh, **graph_options(args))
         if shape.faces is None and getattr(args, "weld", None) is not None:
             raise InputError(f"{args.mesh}: --weld merges a mesh's split vertices; a point "
                              "cloud has none")
@@ -236,8 +235,7 @@ def run(args: argparse.Namespace) -> int:
         from arapkit.mesh.planar import is_planar
 
         # a file without faces is a point cloud: the 3D editor, whatever its shape
-        loaded = load_shape(args.mesh, neighbours=getattr(args, "neighbours", None),
-                            radius=getattr(args, "radius", None))
+        loaded = load_shape(args.mesh, **graph_options(args))
         if (loaded.faces is not None and is_planar(loaded.vertices) and not args.handles
                 and not args.rings_file):
             require_extra(["PIL", "skimage", "shapely", "pythoncdt"], "image",

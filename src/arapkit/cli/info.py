@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from arapkit.cli.common import add_example_epilog, add_graph_options
+from arapkit.cli.common import add_example_epilog, add_graph_options, graph_options
 from arapkit.io import load_shape
 from arapkit.io.clouds import cloud_formats_text
 from arapkit.io.formats import readable_formats
@@ -232,8 +232,7 @@ def _advice(f: dict[str, Any]) -> list[str]:
 def run(args: argparse.Namespace) -> int:
     """Execute ``arapkit info``; returns the exit status."""
     # a file without faces is a point cloud, on the graph deform would build
-    shape = load_shape(args.mesh, neighbours=getattr(args, "neighbours", None),
-                       radius=getattr(args, "radius", None))
+    shape = load_shape(args.mesh, **graph_options(args))
     facts = inspect_mesh(shape) if shape.faces is not None else inspect_cloud(shape)
     facts["file"] = args.mesh
     if args.json:

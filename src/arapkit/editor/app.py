@@ -62,6 +62,7 @@ from arapkit.editor.views import (
 )
 from arapkit.editor.worker import SolveRequest, SolveUpdate, SolveWorker
 from arapkit.errors import InputError
+from arapkit.mesh.cloud import element_nouns
 from arapkit.mesh.selection import connected_region
 
 # the names this module held before its parts moved out (MESH_SUFFIXES, safe_stem: files;
@@ -349,7 +350,7 @@ class EditorApp(Panels, PointerTools, FileActions):
         notes = "; ".join(getattr(m, "notes", [])[:3])
         cloud = m.faces is None
         size = f"a point cloud ({m.graph_description})" if cloud else f"{m.n_faces:,} faces"
-        return (f"**{m.name}**: {m.n_vertices:,} {'points' if cloud else 'vertices'}, {size}"
+        return (f"**{m.name}**: {m.n_vertices:,} {element_nouns(cloud)[1]}, {size}"
                 + (f"  \n_{notes}_" if notes else ""))
 
     def redraw(self) -> None:

@@ -37,7 +37,7 @@ from arapkit.editor.state import EditorState
 from arapkit.editor.tools import TOOLS, find_tool
 from arapkit.editor.topbar import TopBlock
 from arapkit.errors import InputError, worded_for
-from arapkit.mesh.cloud import counted
+from arapkit.mesh.cloud import counted, element_nouns, is_cloud
 
 __all__ = ["MAX_R", "VIEWS", "Panels", "handle_controls", "next_step", "selected_text"]
 
@@ -114,7 +114,8 @@ def selected_text(n: int, shape: Any) -> str:
     >>> selected_text(3, bar())
     'Selected: **3** vertices'
     """
-    return f"Selected: **{n}** " + counted(n, shape).split(" ", 1)[1]
+    one, many = element_nouns(is_cloud(shape))
+    return f"Selected: **{n}** {one if n == 1 else many}"
 
 
 def next_step(state: EditorState) -> str:

@@ -39,7 +39,7 @@ from .neighbours import DEFAULT_NEIGHBOURS, MAX_NEIGHBOURS, check_edges, knn_edg
 from .numbers import bounding_box_diagonal, check_number_range
 from .topology import EdgeTopology
 
-__all__ = ["Graph", "PointCloud", "as_shape", "counted", "is_cloud"]
+__all__ = ["Graph", "PointCloud", "as_shape", "counted", "element_nouns", "is_cloud"]
 
 
 def _normals(values, n: int, name: str) -> np.ndarray | None:
@@ -294,10 +294,20 @@ def counted(n: int, shape=None, *, points: bool | None = None) -> str:
     >>> counted(1, PointCloud(np.eye(3))), counted(4, Mesh(np.eye(3), [[0, 1, 2]]))
     ('1 point', '4 vertices')
     """
-    cloud = is_cloud(shape) if points is None else points
-    if cloud:
-        return f"{n} point" if n == 1 else f"{n} points"
-    return f"{n} vertex" if n == 1 else f"{n} vertices"
+    one, many = element_nouns(is_cloud(shape) if points is None else points)
+    return f"{n} {one if n == 1 else many}"
+
+
+def element_nouns(points: bool) -> tuple[str, str]:
+    """``("point", "points")`` for a point cloud, ``("vertex", "vertices")`` for a mesh:
+    the words every message counting a shape's elements uses (:func:`counted`).
+
+    Examples
+    --------
+    >>> element_nouns(True), element_nouns(False)
+    (('point', 'points'), ('vertex', 'vertices'))
+    """
+    return ("point", "points") if points else ("vertex", "vertices")
 
 
 def as_shape(value, what: str = "mesh") -> Mesh | PointCloud:

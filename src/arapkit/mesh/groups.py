@@ -29,6 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import InputError
+from .cloud import counted
 
 __all__ = ["VertexGroups"]
 
@@ -206,8 +207,7 @@ class VertexGroups:
             k = int((self.rigid == flag).sum())
             if k:
                 held = int(sizes[self.rigid == flag].sum())
-                each = ("point", "points") if points else ("vertex", "vertices")
-                bits.append(f"{_plural(k, word)} ({_plural(held, *each)})")
+                bits.append(f"{_plural(k, word)} ({counted(held, points=points)})")
         return ", ".join(bits) or "no groups"
 
     def remapped(self, index: np.ndarray, n_vertices: int) -> VertexGroups:

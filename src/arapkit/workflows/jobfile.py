@@ -26,7 +26,7 @@ from typing import Any
 from .. import validate
 from ..arap.domains import all_weight_kinds
 from ..errors import InputError
-from ..mesh.cloud import counted
+from ..mesh.cloud import counted, element_nouns
 from ..methods.deformer import INITS, check_method
 from ..methods.registry import method, methods
 from ..validate import iteration_cap, read_input, ring_size, tolerance
@@ -299,7 +299,7 @@ def dry_run(path: str | os.PathLike) -> list[str]:
         cloud = inputs.mesh.faces is None
         lines.append(f"job {i} -> {job['output']}: {job['mesh']} "
                      f"({counted(inputs.mesh.n_vertices, points=cloud)}), "
-                     f"{len(hs.indices)} handle {'points' if cloud else 'vertices'} in "
+                     f"{len(hs.indices)} handle {element_nouns(cloud)[1]} in "
                      f"{len(hs.groups)} group(s)")
         lines += [f"  {line}" for line in describe_groups(inputs.mesh.vertices, hs,
                                                           points=cloud)]
